@@ -1,0 +1,132 @@
+"""The one driver abstraction (the python-can ``BusABC`` of shoveld).
+
+A driver owns one device: it opens its transport, configures the device,
+parses what arrives, and emits timestamped :class:`Reading` objects to a sink.
+``run()`` is the thread body: it reconnects with exponential back-off and keeps
+:class:`DriverHealth` current, so a device that is unplugged and plugged back is
+recovered and reported rather than fatal.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(slots=True)
+class Reading:
+    """Decoded values from one device message, stamped with the host receive time.
+
+    ``values`` maps quantity names (e.g. ``pitch_deg``, ``distance_m``,
+    ``hoist1_a``) to floats; ``invalid`` names quantities the device reported as
+    not valid in this message (a laser with no target, a Modbus channel that
+    timed out), which must never be turned into numbers downstream.
+    """
+
+    device: str
+    t_host: float
+    values: dict[str, float]
+    invalid: frozenset[str] = frozenset()
+    t_device: float | None = None
+
+
+@dataclass
+class DriverHealth:
+    """Counters and state published on the health topic."""
+
+    connected: bool = False
+    messages: int = 0
+    bad_frames: int = 0
+    rejected_bytes: int = 0
+    timeouts: int = 0
+    reconnects: int = 0
+    last_reading_t: float | None = None
+    last_error: str | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def as_dict(self, now: float | None = None) -> dict[str, Any]:
+        d: dict[str, Any] = {
+            "connected": self.connected, "messages": self.messages,
+            "bad_frames": self.bad_frames, "rejected_bytes": self.rejected_bytes,
+            "timeouts": self.timeouts, "reconnects": self.reconnects,
+            "last_error": self.last_error,
+        }
+        if now is not None and self.last_reading_t is not None:
+            d["age_s"] = now - self.last_reading_t
+        d.update(self.extra)
+        return d
+
+
+class DeviceError(RuntimeError):
+    """A device fault worth a clear message (wrong baud rate, no answer, Error message)."""
+
+
+Sink = Callable[[Reading], None]
+
+
+class Driver(ABC):
+    """Base class of every device driver."""
+
+    name: str
+
+    def __init__(self, name: str, clock: Callable[[], float] = time.monotonic,
+                 backoff_s: tuple[float, float] = (0.2, 5.0)) -> None:
+        self.name = name
+        self.clock = clock
+        self.health = DriverHealth()
+        self.backoff_s = backoff_s
+        self._lock = threading.Lock()
+
+    @abstractmethod
+    def open(self) -> None:
+        """Open the transport and configure the device; raise on failure."""
+
+    @abstractmethod
+    def read(self, sink: Sink) -> None:
+        """Block briefly (well under a second), parse what arrived, emit readings."""
+
+    @abstractmethod
+    def close(self) -> None:
+        """Release the transport; must be safe to call twice."""
+
+    def emit(self, sink: Sink, reading: Reading) -> None:
+        self.health.messages += 1
+        self.health.last_reading_t = reading.t_host
+        sink(reading)
+
+    def run(self, sink: Sink, stop: threading.Event) -> None:
+        """Thread body: open, read until stopped, reconnect with back-off on faults."""
+        delay = self.backoff_s[0]
+        first = True
+        while not stop.is_set():
+            try:
+                self.open()
+                self.health.connected = True
+                if not first:
+                    self.health.reconnects += 1
+                    log.warning("%s: reconnected", self.name)
+                first = False
+                delay = self.backoff_s[0]
+                while not stop.is_set():
+                    self.read(sink)
+            except Exception as e:  # noqa: BLE001 - any device fault leads to reconnect
+                self.health.connected = False
+                self.health.last_error = f"{type(e).__name__}: {e}"
+                log.error("%s: %s; retrying in %.1f s", self.name, self.health.last_error, delay)
+                first = False
+            finally:
+                try:
+                    self.close()
+                except Exception:  # noqa: BLE001
+                    pass
+            if stop.wait(delay):
+                break
+            delay = min(delay * 2.0, self.backoff_s[1])
+        self.health.connected = False

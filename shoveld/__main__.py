@@ -1,0 +1,3 @@
+from shoveld.cli import main
+
+raise SystemExit(main())

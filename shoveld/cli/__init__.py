@@ -1,0 +1,54 @@
+"""The ``shoveld`` command: one program, subcommands registered by module.
+
+Each subcommand lives in its own module under ``shoveld.cli`` exposing
+``register(subparsers)``; listing it in ``SUBCOMMANDS`` is all it takes to add one.
+Heavy imports happen inside the command functions so ``--help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import sys
+
+SUBCOMMANDS: tuple[str, ...] = (
+    "sim", "calibrate", "estimate", "diagnose", "decode", "record", "replay", "run",
+    "cab", "passes", "check_config", "demo",
+)
+
+
+class CliError(Exception):
+    """An error to print as one line and exit with status 2."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="shoveld",
+        description="Onboard payload monitor for electric cable (rope) mining shovels.")
+    p.add_argument("-v", "--verbose", action="count", default=0, help="more log output")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name in SUBCOMMANDS:
+        try:
+            mod = importlib.import_module(f"shoveld.cli.{name}")
+        except ModuleNotFoundError as e:
+            if e.name == f"shoveld.cli.{name}":
+                continue  # subcommand not built yet
+            raise
+        mod.register(sub)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    level = logging.WARNING - 10 * min(args.verbose, 2)
+    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s",
+                        stream=sys.stderr)
+    try:
+        return int(args.func(args) or 0)
+    except CliError as e:
+        print(f"shoveld {args.command}: error: {e}", file=sys.stderr)
+        return 2
+    except BrokenPipeError:
+        return 0

@@ -1,0 +1,59 @@
+"""Installation geometry: device readings <-> joint variables of the signals table.
+
+The arm-geometry sensor sits on the saddle block: the MTi pitch is the handle
+angle (plus a mounting offset), its yaw the swing angle against a configured
+zero, and the laser distance maps affinely to crowd extension. Both directions
+live here so the daemon (device -> joints) and the virtual hardware
+(joints -> device) use one set of numbers.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Installation:
+    """Mounting constants of one shovel, from the installer's survey."""
+
+    handle_pitch_offset_deg: float = 0.0
+    """handle_deg = mti_pitch_deg * handle_pitch_sign + offset."""
+    handle_pitch_sign: float = 1.0
+    swing_yaw_zero_deg: float = 0.0
+    """swing_deg = wrap(mti_yaw_deg - zero) * swing_yaw_sign."""
+    swing_yaw_sign: float = 1.0
+    crowd_offset_m: float = 5.88
+    """crowd_m = crowd_offset_m + crowd_gain * laser_m (laser 4.91 m range over the
+    6 .. 10.79 m crowd stroke, model-notes)."""
+    crowd_gain: float = 1.0
+
+    def handle_deg(self, mti_pitch_deg: float) -> float:
+        return self.handle_pitch_sign * mti_pitch_deg + self.handle_pitch_offset_deg
+
+    def mti_pitch_deg(self, handle_deg: float) -> float:
+        return (handle_deg - self.handle_pitch_offset_deg) / self.handle_pitch_sign
+
+    def swing_deg(self, mti_yaw_deg: float) -> float:
+        return self.swing_yaw_sign * wrap_deg(mti_yaw_deg - self.swing_yaw_zero_deg)
+
+    def mti_yaw_deg(self, swing_deg: float) -> float:
+        return wrap_deg(swing_deg / self.swing_yaw_sign + self.swing_yaw_zero_deg)
+
+    def crowd_m(self, laser_m: float) -> float:
+        return self.crowd_offset_m + self.crowd_gain * laser_m
+
+    def laser_m(self, crowd_m: float) -> float:
+        return (crowd_m - self.crowd_offset_m) / self.crowd_gain
+
+
+def wrap_deg(a: float) -> float:
+    """Angle into [-180, 180)."""
+    return (a + 180.0) % 360.0 - 180.0
+
+
+def unwrap_deg(prev: float, a: float) -> float:
+    """Continue ``a`` from ``prev`` across the +-180 wrap (swing passes through it)."""
+    if math.isnan(prev):
+        return a
+    return prev + wrap_deg(a - prev)

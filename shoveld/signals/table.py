@@ -1,0 +1,229 @@
+"""Reader and writer of signals tables (UTF-8 CSV, ``shovel-signals/1``).
+
+The reader refuses rather than guesses: every error names the file, the line and
+the column, and what was expected. Blank cells are allowed (unknown value) and
+become NaN in memory; a literal ``nan`` in the file is rejected because it hides
+whether the value was unknown or broken.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from shoveld.signals.columns import BY_NAME, COLUMN_NAMES, FORMAT_NAME
+
+
+class SignalsFormatError(ValueError):
+    """A signals table that does not follow ``shovel-signals/1``."""
+
+    def __init__(self, path: str, line: int | None, column: str | None, message: str) -> None:
+        where = path
+        if line is not None:
+            where += f":{line}"
+        if column is not None:
+            where += f" column '{column}'"
+        super().__init__(f"{where}: {message}")
+        self.path = path
+        self.line = line
+        self.column = column
+
+
+@dataclass
+class SignalsTable:
+    """A whole table in memory: one float64 array per column (NaN where blank)."""
+
+    columns: dict[str, np.ndarray]
+    meta: dict[str, str] = field(default_factory=dict)
+    source: str = "<memory>"
+
+    def __len__(self) -> int:
+        return int(self.columns["time_s"].shape[0])
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        return self.columns[name]
+
+    @property
+    def time(self) -> np.ndarray:
+        return self.columns["time_s"]
+
+    @property
+    def sample_rate_hz(self) -> float:
+        """Declared rate, or the median rate of the time axis."""
+        if "sample_rate_hz" in self.meta:
+            return float(self.meta["sample_rate_hz"])
+        t = self.time
+        if len(t) < 2:
+            return float("nan")
+        return float(1.0 / np.median(np.diff(t)))
+
+    @property
+    def known_payload_kg(self) -> float | None:
+        v = self.meta.get("known_payload_kg")
+        return float(v) if v not in (None, "") else None
+
+    def payload_truth(self) -> np.ndarray:
+        """Per-sample known payload: the column where filled, else ``known_payload_kg``."""
+        p = self.columns["payload_kg"].copy()
+        k = self.known_payload_kg
+        if k is not None:
+            p[np.isnan(p)] = k
+        return p
+
+    def slice(self, mask: np.ndarray) -> SignalsTable:
+        return SignalsTable({k: v[mask] for k, v in self.columns.items()}, dict(self.meta),
+                            self.source)
+
+    @classmethod
+    def from_arrays(cls, meta: dict[str, str] | None = None, **cols: Iterable[float]
+                    ) -> SignalsTable:
+        """Build a table; missing columns are filled with NaN (unknown)."""
+        n = len(np.asarray(cols["time_s"]))
+        out = {}
+        for name in COLUMN_NAMES:
+            if name in cols:
+                a = np.asarray(cols[name], dtype=float)
+                if a.shape != (n,):
+                    raise ValueError(f"column {name}: expected {n} values, got {a.shape}")
+                out[name] = a
+            else:
+                out[name] = np.full(n, np.nan)
+        unknown = set(cols) - set(COLUMN_NAMES)
+        if unknown:
+            raise ValueError(f"unknown columns {sorted(unknown)}; expected {COLUMN_NAMES}")
+        m = {"format": FORMAT_NAME}
+        m.update(meta or {})
+        return cls(out, m)
+
+
+def _parse_meta(path: str, lineno: int, text: str, meta: dict[str, str]) -> None:
+    body = text[1:].strip()
+    if not body:
+        return
+    if ":" not in body:
+        raise SignalsFormatError(path, lineno, None,
+                                 f"metadata line must be '# key: value', got {text!r}")
+    key, value = (s.strip() for s in body.split(":", 1))
+    if key == "format" and value != FORMAT_NAME:
+        raise SignalsFormatError(path, lineno, None,
+                                 f"format is {value!r}; this reader understands {FORMAT_NAME!r}")
+    if key in ("sample_rate_hz", "known_payload_kg"):
+        try:
+            v = float(value)
+        except ValueError:
+            raise SignalsFormatError(path, lineno, None,
+                                     f"'{key}' must be a number, got {value!r}") from None
+        if not math.isfinite(v) or (key == "sample_rate_hz" and v <= 0) or (
+                key == "known_payload_kg" and not 0 <= v <= 150000):
+            raise SignalsFormatError(path, lineno, None, f"'{key}' out of range: {value!r}")
+    meta[key] = value
+
+
+def read_table(path: str | Path, text: str | None = None) -> SignalsTable:
+    """Read and validate a signals table; raise :class:`SignalsFormatError` on any fault."""
+    spath = str(path)
+    if text is None:
+        try:
+            raw = Path(path).read_bytes()
+        except OSError as e:
+            raise SignalsFormatError(spath, None, None, f"cannot read: {e.strerror}") from None
+        try:
+            text = raw.decode("utf-8")
+        except UnicodeDecodeError as e:
+            raise SignalsFormatError(spath, None, None,
+                                     f"not UTF-8 (byte offset {e.start})") from None
+    lines = text.splitlines()
+    meta: dict[str, str] = {}
+    i = 0
+    while i < len(lines) and (lines[i].startswith("#") or not lines[i].strip()):
+        if lines[i].startswith("#"):
+            _parse_meta(spath, i + 1, lines[i], meta)
+        i += 1
+    if i >= len(lines):
+        raise SignalsFormatError(spath, None, None, "no header line (expected the column names)")
+    header_line = i + 1
+    header = [h.strip() for h in next(csv.reader([lines[i].lstrip("\ufeff")]))]
+    missing = [c for c in COLUMN_NAMES if c not in header]
+    if missing:
+        raise SignalsFormatError(spath, header_line, missing[0],
+                                 f"missing column(s) {missing}; expected {list(COLUMN_NAMES)}")
+    if tuple(header) != COLUMN_NAMES:
+        extra = [h for h in header if h not in COLUMN_NAMES]
+        what = f"unknown column(s) {extra}" if extra else "columns out of order"
+        raise SignalsFormatError(spath, header_line, extra[0] if extra else None,
+                                 f"{what}; expected exactly {list(COLUMN_NAMES)}")
+    ncol = len(COLUMN_NAMES)
+    rows: list[list[float]] = []
+    linenos: list[int] = []
+    reader = csv.reader(io.StringIO("\n".join(lines[i + 1:])))
+    for k, cells in enumerate(reader):
+        lineno = header_line + 1 + k
+        if not cells or (len(cells) == 1 and not cells[0].strip()):
+            continue
+        if len(cells) != ncol:
+            raise SignalsFormatError(spath, lineno, None,
+                                     f"expected {ncol} values, found {len(cells)}")
+        row = []
+        for name, cell in zip(COLUMN_NAMES, cells, strict=True):
+            cell = cell.strip()
+            if cell == "":
+                if name == "time_s":
+                    raise SignalsFormatError(spath, lineno, name, "time must not be blank")
+                row.append(math.nan)
+                continue
+            try:
+                v = float(cell)
+            except ValueError:
+                raise SignalsFormatError(spath, lineno, name,
+                                         f"expected a number, got {cell!r}") from None
+            if not math.isfinite(v):
+                raise SignalsFormatError(spath, lineno, name,
+                                         f"{cell!r} is not a finite number (leave unknown "
+                                         "values blank)")
+            col = BY_NAME[name]
+            if not col.lo <= v <= col.hi:
+                raise SignalsFormatError(
+                    spath, lineno, name,
+                    f"{v:g} {col.unit} is outside the plausible range "
+                    f"[{col.lo:g}, {col.hi:g}] {col.unit} ({col.doc}); wrong unit?")
+            row.append(v)
+        if rows and row[0] <= rows[-1][0]:
+            raise SignalsFormatError(
+                spath, lineno, "time_s",
+                f"time {row[0]:g} s is not after the previous row's {rows[-1][0]:g} s "
+                f"(line {linenos[-1]}); rows must be in strictly increasing time")
+        rows.append(row)
+        linenos.append(lineno)
+    if not rows:
+        raise SignalsFormatError(spath, header_line + 1, None, "no data rows")
+    arr = np.array(rows, dtype=float)
+    return SignalsTable({n: arr[:, j].copy() for j, n in enumerate(COLUMN_NAMES)}, meta, spath)
+
+
+def _fmt(v: float) -> str:
+    if math.isnan(v):
+        return ""
+    return f"{v:.6g}" if abs(v) >= 1e5 else f"{v:.6f}".rstrip("0").rstrip(".")
+
+
+def iter_rows(table: SignalsTable) -> Iterator[str]:
+    cols = [table.columns[n] for n in COLUMN_NAMES]
+    for j in range(len(table)):
+        yield ",".join(_fmt(float(c[j])) for c in cols)
+
+
+def write_table(path: str | Path, table: SignalsTable) -> None:
+    """Write ``table`` as ``shovel-signals/1`` (metadata lines, header, rows)."""
+    meta = {"format": FORMAT_NAME, **table.meta}
+    with open(path, "w", encoding="utf-8", newline="\n") as f:
+        for k, v in meta.items():
+            f.write(f"# {k}: {v}\n")
+        f.write(",".join(COLUMN_NAMES) + "\n")
+        for line in iter_rows(table):
+            f.write(line + "\n")
