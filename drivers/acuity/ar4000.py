@@ -1,0 +1,387 @@
+"""Acuity AccuRange AR4000 laser distance sensor over RS-232 (ASCII protocol).
+
+The laser measures the saddle-block-to-handle distance that becomes crowd
+extension (see :class:`shoveld.installation.Installation`). The driver configures
+the sensor, reads its continuous ASCII stream and emits ``distance_m``.
+
+Protocol facts, from the *AR4000 User's Manual* (Acuity/Schmitt, LLL004001 Rev 2.7,
+sections 9.1 "Output Data Formats" and 13.1 "Command Quick Reference"):
+
+* serial data: 8 data bits, no parity, 1 stop bit.
+* ``S<Interval>`` sets the sample interval, 20 <= Interval <= 9999999; the
+  factory default 5 samples/s is listed as ``S200000``, so the unit is the
+  microsecond.
+* ``A<Mode>`` enables serial output: 1 = calibrated distance in inches,
+  2 = uncalibrated sensor data, 3 = flow control, 4 = calibrated distance in
+  millimetres. Factory default: calibrated (inches) output on.
+* ``F[<MaxRange>]`` sets the maximum range, 0..99999; factory default 650 inches.
+* ``P[<Amplitude>]`` / ``M[<Amplitude>]`` set the minimum / maximum valid
+  amplitude (signal strength); outside that window the calibrated distance output
+  "will be zero". Factory defaults 0 and 1023; the manual says 0..999 may be
+  entered.
+* ASCII calibrated output, one sample per line: ``[DD]D.DD<CR><LF>`` (4 to 6
+  characters before CR LF).
+* A calibrated distance of zero therefore means *no valid target* (amplitude out
+  of window, out of range); it is emitted as ``invalid={"distance_m"}``, never as
+  a distance.
+
+Not confirmed from the manual excerpts available, hence configurable:
+
+* the command terminator (``terminator``, default CR): the quick reference counts
+  command lengths without one, but optional numeric parameters need a delimiter;
+* the millimetre output layout (the parser accepts digits with an optional
+  decimal fraction in either unit);
+* the unit of the ``F`` parameter when millimetre output is selected
+  (``max_range_unit``, default inches, as the factory default is quoted);
+* the factory baud rate (``baudrate``, default 9600);
+* whether the sensor acknowledges commands. The driver does not rely on an
+  acknowledgement: the device counts as answering when a well-formed distance line
+  arrives within ``answer_timeout_s`` after configuration.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+import time
+from collections import deque
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, fields
+from typing import Any
+
+from drivers.base import DeviceError, Driver, Reading, Sink
+from drivers.capture.tap import ByteTap, SerialFactory, open_serial
+
+log = logging.getLogger(__name__)
+
+DISTANCE = "distance_m"
+_UNIT_TO_M = {"mm": 0.001, "in": 0.0254}
+_OUTPUT_MODE = {"in": 1, "mm": 4}
+# Optional sign (zero point / span can reverse the axis), 1-7 integer digits,
+# optional fraction. Anything else on a line is garbage.
+_LINE_RE = re.compile(rb"^ *(-?)(\d{1,7})(?:\.(\d{1,4}))? *$")
+
+NO_TARGET = 0.0
+
+
+def parse_line(line: bytes, unit_m: float) -> float | None:
+    """Parse one output line (without CR LF) to metres; None if malformed.
+
+    Returns ``0.0`` for the sensor's zero (no valid target); the caller decides.
+    """
+    m = _LINE_RE.match(line)
+    if m is None:
+        return None
+    sign, whole, frac = m.groups()
+    value = int(whole) + (int(frac) / 10 ** len(frac) if frac else 0.0)
+    if value == 0:
+        return NO_TARGET
+    return (-value if sign else value) * unit_m
+
+
+class LineSplitter:
+    """Cuts the byte stream into lines and counts what is not a line.
+
+    Bytes are accumulated until LF; a line longer than ``max_line`` without LF is
+    discarded (counted as garbage) so a babbling device cannot grow the buffer.
+    """
+
+    def __init__(self, max_line: int = 32) -> None:
+        self.max_line = max_line
+        self._buf = bytearray()
+        self.overflow_bytes = 0
+
+    def feed(self, data: bytes) -> list[bytes]:
+        self._buf += data
+        out: list[bytes] = []
+        while True:
+            i = self._buf.find(b"\n")
+            if i < 0:
+                break
+            line = bytes(self._buf[:i])
+            del self._buf[:i + 1]
+            if line.endswith(b"\r"):
+                line = line[:-1]
+            out.append(line)
+        if len(self._buf) > self.max_line:
+            self.overflow_bytes += len(self._buf)
+            out.append(bytes(self._buf))  # reported as one malformed line
+            self._buf.clear()
+        return out
+
+    def clear(self) -> None:
+        self._buf.clear()
+
+
+@dataclass(frozen=True)
+class Ar4000Config:
+    """Configuration of one AR4000 (keys of the ``[devices.<name>]`` table)."""
+
+    port: str
+    """Serial device path or pyserial URL (``/dev/ttyS1``, ``/dev/serial/by-id/...``)."""
+    baudrate: int = 9600
+    sample_interval_us: int = 20000
+    """``S`` command; 20000 us = 50 samples/s."""
+    units: str = "mm"
+    """Calibrated output unit: ``mm`` (``A4``) or ``in`` (``A1``)."""
+    max_range_m: float | None = None
+    """``F`` command; None leaves the sensor's setting alone."""
+    max_range_unit: str = "in"
+    min_amplitude: int | None = None
+    """``P`` command; None leaves the sensor's setting alone."""
+    max_amplitude: int | None = None
+    """``M`` command; None leaves the sensor's setting alone."""
+    configure: bool = True
+    """Send the configuration commands on open (False: only listen)."""
+    terminator: str = "\r"
+    command_gap_s: float = 0.05
+    answer_timeout_s: float = 2.0
+    silent_timeout_s: float = 1.0
+    """No well-formed line for this long (clock seconds) -> silent, reconnect."""
+    read_timeout_s: float = 0.05
+    max_line_bytes: int = 32
+    babble_window: int = 50
+    """Lines considered when judging whether the device babbles."""
+    babble_ratio: float = 0.3
+    """Fraction of malformed lines in the window above which ``babbling`` is reported."""
+    max_plausible_m: float = 20.0
+    """Distances outside [0, this] are reported invalid (AR4000 range is 16.5 m)."""
+
+    @classmethod
+    def from_config(cls, d: Mapping[str, Any]) -> Ar4000Config:
+        """Build from a config table; ``ValueError`` names the offending key."""
+        known = {f.name: f for f in fields(cls)}
+        ignored = {"kind", "name"}
+        for k in d:
+            if k not in known and k not in ignored:
+                raise ValueError(f"ar4000: unknown key {k!r}; known keys: {sorted(known)}")
+        if "port" not in d:
+            raise ValueError("ar4000: key 'port' is required (serial device path)")
+        kw: dict[str, Any] = {}
+        for k, v in d.items():
+            if k in ignored:
+                continue
+            kw[k] = _coerce(k, v, known[k].type)
+        cfg = cls(**kw)
+        cfg.validate()
+        return cfg
+
+    def validate(self) -> None:
+        def bad(key: str, why: str) -> ValueError:
+            return ValueError(f"ar4000: key {key!r} {why} (got {getattr(self, key)!r})")
+
+        if not self.port:
+            raise bad("port", "must be a non-empty device path")
+        if self.baudrate not in (1200, 2400, 4800, 9600, 19200, 38400, 57600, 115200):
+            raise bad("baudrate", "must be a standard rate 1200..115200")
+        if not 20 <= self.sample_interval_us <= 9_999_999:
+            raise bad("sample_interval_us", "must be in 20..9999999 (microseconds)")
+        if self.units not in _UNIT_TO_M:
+            raise bad("units", "must be 'mm' or 'in'")
+        if self.max_range_unit not in _UNIT_TO_M:
+            raise bad("max_range_unit", "must be 'mm' or 'in'")
+        if self.max_range_m is not None and not (
+                0 < self.max_range_m and self.max_range_m / _UNIT_TO_M[self.max_range_unit]
+                <= 99999):
+            raise bad("max_range_m", "must be > 0 and fit the F command (0..99999 units)")
+        for key in ("min_amplitude", "max_amplitude"):
+            v = getattr(self, key)
+            if v is not None and not 0 <= v <= 1023:
+                raise bad(key, "must be in 0..1023")
+        if (self.min_amplitude is not None and self.max_amplitude is not None
+                and self.min_amplitude >= self.max_amplitude):
+            raise bad("min_amplitude", "must be below max_amplitude")
+        if self.terminator not in ("", "\r", "\n", "\r\n"):
+            raise bad("terminator", "must be one of '', CR, LF, CR LF")
+        for key in ("answer_timeout_s", "silent_timeout_s", "read_timeout_s"):
+            if not getattr(self, key) > 0:
+                raise bad(key, "must be > 0 seconds")
+        if self.command_gap_s < 0:
+            raise bad("command_gap_s", "must be >= 0")
+        if not 8 <= self.max_line_bytes <= 1024:
+            raise bad("max_line_bytes", "must be in 8..1024")
+        if self.babble_window < 1 or not 0 < self.babble_ratio <= 1:
+            raise bad("babble_ratio", "must be in (0, 1] with babble_window >= 1")
+        if not self.max_plausible_m > 0:
+            raise bad("max_plausible_m", "must be > 0")
+
+    @property
+    def unit_m(self) -> float:
+        return _UNIT_TO_M[self.units]
+
+    def commands(self) -> list[bytes]:
+        """The configuration commands, in the order they are sent."""
+        term = self.terminator.encode()
+        cmds = [f"A{_OUTPUT_MODE[self.units]}", f"S{self.sample_interval_us}"]
+        if self.max_range_m is not None:
+            cmds.append(f"F{round(self.max_range_m / _UNIT_TO_M[self.max_range_unit])}")
+        if self.min_amplitude is not None:
+            cmds.append(f"P{self.min_amplitude}")
+        if self.max_amplitude is not None:
+            cmds.append(f"M{self.max_amplitude}")
+        return [c.encode("ascii") + term for c in cmds]
+
+
+def _coerce(key: str, v: Any, typ: Any) -> Any:
+    """Check a config value against the field's annotated type (given as a string)."""
+    t = str(typ)
+    if v is None and "None" in t:
+        return None
+    if t.startswith("int"):
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise ValueError(f"ar4000: key {key!r} must be an integer, got {v!r}")
+        return v
+    if t.startswith("float"):
+        if isinstance(v, bool) or not isinstance(v, int | float):
+            raise ValueError(f"ar4000: key {key!r} must be a number, got {v!r}")
+        return float(v)
+    if t.startswith("str"):
+        if not isinstance(v, str):
+            raise ValueError(f"ar4000: key {key!r} must be a string, got {v!r}")
+        return v
+    if t.startswith("bool"):
+        if not isinstance(v, bool):
+            raise ValueError(f"ar4000: key {key!r} must be true or false, got {v!r}")
+        return v
+    return v
+
+
+class Ar4000Driver(Driver):
+    """Reads calibrated distances from an AR4000 and emits ``distance_m`` readings.
+
+    Health: ``bad_frames`` counts malformed lines, ``rejected_bytes`` their bytes,
+    ``timeouts`` silent periods; ``extra`` carries ``no_target`` (zero readings),
+    ``implausible``, ``silent`` and ``babbling`` (malformed fraction of the recent
+    lines above ``babble_ratio``).
+    """
+
+    def __init__(self, name: str, config: Ar4000Config,
+                 clock: Callable[[], float] = time.monotonic,
+                 backoff_s: tuple[float, float] = (0.2, 5.0),
+                 serial_factory: SerialFactory | None = None) -> None:
+        super().__init__(name, clock, backoff_s)
+        self.config = config
+        self.tap: ByteTap | None = None
+        """Set by the recorder: every byte read/written is copied to it."""
+        self._factory = serial_factory
+        self._ser: Any = None
+        self._splitter = LineSplitter(config.max_line_bytes)
+        self._recent: deque[bool] = deque(maxlen=config.babble_window)
+        self._pending: list[Reading] = []
+        self._last_good = 0.0
+        self._garbage_since_good = 0
+        self.health.extra.update({"no_target": 0, "implausible": 0, "silent": False,
+                                  "babbling": False})
+
+    @classmethod
+    def from_config(cls, name: str, d: Mapping[str, Any], **kw: Any) -> Ar4000Driver:
+        return cls(name, Ar4000Config.from_config(d), **kw)
+
+    # -- transport ---------------------------------------------------------------------
+
+    def open(self) -> None:
+        cfg = self.config
+        self.close()
+        extra = {"factory": self._factory} if self._factory is not None else {}
+        try:
+            self._ser = open_serial(cfg.port, cfg.baudrate, cfg.read_timeout_s, self.tap,
+                                    **extra)
+        except Exception as e:  # noqa: BLE001 - pyserial raises OSError/SerialException
+            raise DeviceError(f"cannot open AR4000 port {cfg.port}: {e}") from e
+        self._splitter.clear()
+        self._pending.clear()
+        if cfg.configure:
+            for cmd in cfg.commands():
+                self._ser.write(cmd)
+                if cfg.command_gap_s:
+                    time.sleep(cfg.command_gap_s)
+            # lines already queued may be in the old unit: start clean
+            self._ser.reset_input_buffer()
+        # The device answers when a well-formed line arrives; real time, because a
+        # stepped replay clock may not move while we wait.
+        deadline = time.monotonic() + cfg.answer_timeout_s
+        while time.monotonic() < deadline:
+            data = self._ser.read(max(1, self._ser.in_waiting))
+            if data and self._parse(data, self._pending.append):
+                self._last_good = self.clock()
+                self.health.extra["silent"] = False
+                return
+        port, baud = cfg.port, cfg.baudrate
+        self.close()
+        raise DeviceError(f"no answer from AR4000 on {port} at {baud}: "
+                          "wrong baud rate or device off?")
+
+    def close(self) -> None:
+        ser, self._ser = self._ser, None
+        if ser is not None:
+            try:
+                ser.close()
+            except Exception:  # noqa: BLE001
+                pass
+
+    # -- parsing -----------------------------------------------------------------------
+
+    def _parse(self, data: bytes, out: Callable[[Reading], None]) -> int:
+        """Parse a chunk; hand readings to ``out``; return how many lines were good."""
+        cfg = self.config
+        good = 0
+        for line in self._splitter.feed(data):
+            now = self.clock()
+            value = parse_line(line, cfg.unit_m)
+            if value is None:
+                if line.strip():
+                    self.health.bad_frames += 1
+                    self.health.rejected_bytes += len(line) + 1
+                    self._garbage_since_good += len(line) + 1
+                    self._recent.append(False)
+                continue
+            good += 1
+            self._recent.append(True)
+            self._garbage_since_good = 0
+            if value == NO_TARGET:
+                self.health.extra["no_target"] += 1
+                out(Reading(self.name, now, {}, frozenset({DISTANCE})))
+            elif not 0.0 <= value <= cfg.max_plausible_m:
+                self.health.extra["implausible"] += 1
+                out(Reading(self.name, now, {}, frozenset({DISTANCE})))
+            else:
+                out(Reading(self.name, now, {DISTANCE: value}))
+        self._update_babbling()
+        return good
+
+    def _update_babbling(self) -> None:
+        n = len(self._recent)
+        bad = n - sum(self._recent)
+        babbling = n >= min(10, self.config.babble_window) and bad / n > self.config.babble_ratio
+        if babbling and not self.health.extra["babbling"]:
+            log.warning("%s: AR4000 babbling: %d of the last %d lines malformed",
+                        self.name, bad, n)
+            self.health.last_error = f"babbling: {bad} of the last {n} lines malformed"
+        self.health.extra["babbling"] = babbling
+
+    def read(self, sink: Sink) -> None:
+        ser = self._ser
+        if ser is None:
+            raise DeviceError("AR4000 port not open")
+        if self._pending:
+            pending, self._pending = self._pending, []
+            for r in pending:
+                self.emit(sink, r)
+        try:
+            data = ser.read(max(1, ser.in_waiting))
+        except Exception as e:  # noqa: BLE001 - unplugged USB adapter etc.
+            raise DeviceError(f"AR4000 read failed on {self.config.port}: {e}") from e
+        if data and self._parse(data, lambda r: self.emit(sink, r)):
+            self._last_good = self.clock()
+            self.health.extra["silent"] = False
+            return
+        quiet = self.clock() - self._last_good
+        if quiet > self.config.silent_timeout_s:
+            self.health.timeouts += 1
+            self.health.extra["silent"] = True
+            if self._garbage_since_good:
+                why = (f"no valid distance for {quiet:.1f} s, only "
+                       f"{self._garbage_since_good} bytes of garbage (babbling)")
+            else:
+                why = f"no data for {quiet:.1f} s (silent)"
+            raise DeviceError(f"AR4000 on {self.config.port}: {why}")

@@ -1,0 +1,98 @@
+"""Dig-cycle phase recognition from joint motion.
+
+A small state machine over the causal joint estimates. The payload filter runs
+only in LIFT and SWING, where the dipper hangs free and the model holds; DIG
+(bank forces), DUMP (mass leaving) and RETURN (lowering on the weak hoist field)
+are excluded. Thresholds are per-site settings, not constants of nature.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+PHASES: tuple[str, ...] = ("idle", "dig", "lift", "swing", "dump", "return")
+IDLE, DIG, LIFT, SWING, DUMP, RETURN = range(6)
+ESTIMATING = frozenset({LIFT, SWING})
+
+
+@dataclass(frozen=True)
+class PhaseConfig:
+    """Thresholds of the phase machine (degrees, degrees per second, seconds)."""
+
+    tuck_deg: float = -25.0
+    """Below this handle angle a rising dipper starts a dig."""
+    dig_exit_deg: float = -4.0
+    """The dipper has left the bank when the handle rises above this angle."""
+    rise_deg_s: float = 1.5
+    """Handle rate that counts as rising."""
+    swing_on_deg_s: float = 4.0
+    swing_off_deg_s: float = 1.5
+    stop_hold_s: float = 0.3
+    """The swing must stay below ``swing_off`` this long to count as stopped."""
+    idle_rate_deg_s: float = 0.5
+    idle_hold_s: float = 10.0
+    min_dig_s: float = 2.0
+
+
+class PhaseMachine:
+    """Feed one sample at a time; ``phase`` is the current phase index."""
+
+    def __init__(self, cfg: PhaseConfig | None = None) -> None:
+        self.cfg = cfg or PhaseConfig()
+        self.phase = IDLE
+        self.since = -math.inf
+        self._slow_since: float | None = None
+        self._still_since: float | None = None
+        self._swing_dir = 0.0
+
+    def _enter(self, phase: int, t: float) -> None:
+        self.phase = phase
+        self.since = t
+        self._slow_since = None
+
+    def update(self, t: float, th_deg: float, thd_deg_s: float, swing_rate_deg_s: float,
+               crowd_rate_m_s: float = 0.0) -> int:
+        """Advance with the current handle angle and rates; return the phase."""
+        c = self.cfg
+        if any(math.isnan(x) for x in (th_deg, thd_deg_s, swing_rate_deg_s)):
+            return self.phase
+        moving = (abs(thd_deg_s) > c.idle_rate_deg_s or abs(swing_rate_deg_s) > c.idle_rate_deg_s
+                  or abs(crowd_rate_m_s) > 0.02)
+        if moving:
+            self._still_since = None
+        elif self._still_since is None:
+            self._still_since = t
+        rising_from_tuck = th_deg < c.tuck_deg and thd_deg_s > c.rise_deg_s \
+            and abs(swing_rate_deg_s) < c.swing_on_deg_s
+        p = self.phase
+        if p in (IDLE, RETURN):
+            if rising_from_tuck:
+                self._enter(DIG, t)
+            elif p == RETURN and self._still_since is not None \
+                    and t - self._still_since > c.idle_hold_s:
+                self._enter(IDLE, t)
+        elif p == DIG:
+            if t - self.since >= c.min_dig_s and (th_deg > c.dig_exit_deg
+                                                  or abs(swing_rate_deg_s) > c.swing_on_deg_s):
+                self._enter(LIFT, t)
+        elif p == LIFT:
+            if abs(swing_rate_deg_s) > c.swing_on_deg_s:
+                self._swing_dir = math.copysign(1.0, swing_rate_deg_s)
+                self._enter(SWING, t)
+        elif p == SWING:
+            if abs(swing_rate_deg_s) < c.swing_off_deg_s:
+                if self._slow_since is None:
+                    self._slow_since = t
+                elif t - self._slow_since >= c.stop_hold_s:
+                    self._enter(DUMP, t)
+            else:
+                self._slow_since = None
+        elif p == DUMP:
+            if swing_rate_deg_s * self._swing_dir < -c.swing_on_deg_s or rising_from_tuck \
+                    or thd_deg_s < -4 * c.rise_deg_s:
+                self._enter(RETURN, t)
+        if p not in (IDLE, DIG) and self._still_since is not None \
+                and t - self._still_since > c.idle_hold_s:
+            self._enter(IDLE, t)
+        return self.phase

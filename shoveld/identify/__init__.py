@@ -1,0 +1,1 @@
+"""Offline identification of the model parameters."""

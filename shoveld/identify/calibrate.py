@@ -1,0 +1,311 @@
+"""Least-squares identification of the model parameters (``shoveld calibrate``).
+
+The thesis's method: the equations are homogeneous in the parameters, so empty
+and known-load trials are stacked and the known load fixes the scale. Static
+poses (no motion) identify the gravity parameters alone; the dynamic parameters
+follow from moving samples with the gravity part held. ``method="joint"`` fits
+everything at once instead. Samples where the model does not hold are excluded
+with a reason, and the report says how many and why.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from shoveld.kinematics.offline import offline_kinematics
+from shoveld.model.kin import Kinematics
+from shoveld.model.model import EQUATIONS, Model
+from shoveld.model.params import ModelParams
+from shoveld.signals.table import SignalsTable
+
+STATIC_PARAMS = ("Md", "MdLc", "K_H", "K_C")
+"""Gravity-part parameters of the base model, identified from static poses."""
+
+
+@dataclass(frozen=True)
+class ExclusionConfig:
+    """When a sample is not used for identification."""
+
+    current_full_scale_a: float = 4000.0
+    saturation_fraction: float = 0.98
+    hoist_field_nominal_a: float = 70.0
+    weak_field_fraction: float = 0.92
+    min_rope_current_a: float = 20.0
+    static_rate_deg_s: float = 0.15
+    static_crowd_m_s: float = 0.004
+    static_acc_deg_s2: float = 1.0
+    friction_min_rate_deg_s: float = 1.0
+    friction_min_crowd_m_s: float = 0.02
+
+
+@dataclass
+class FileData:
+    """One table prepared for fitting: kinematics, known payload, used-sample mask."""
+
+    name: str
+    kin: Kinematics
+    payload: np.ndarray
+    use: np.ndarray
+    static: np.ndarray
+    excluded: Counter[str]
+
+
+def exclusion_masks(table: SignalsTable, model: Model, cfg: ExclusionConfig,
+                    window_s: float = 0.5) -> FileData:
+    """Kinematics of a table and, per sample, whether and why it is excluded."""
+    cols = model.transform(dict(table.columns))
+    kin, ok = offline_kinematics(cols, window_s)
+    n = len(kin)
+    reasons = np.full(n, "", dtype=object)
+    payload = table.payload_truth()
+
+    def mark(mask: np.ndarray, why: str) -> None:
+        reasons[(reasons == "") & mask] = why
+
+    mark(~ok, "missing or invalid samples (and the smoothing window around them)")
+    full = cfg.current_full_scale_a * cfg.saturation_fraction
+    sat = np.zeros(n, dtype=bool)
+    for c in ("hoist1_a", "hoist2_a", "crowd_a"):
+        sat |= np.abs(np.nan_to_num(cols[c])) >= full
+    mark(sat, "saturated current sensor")
+    mark(~np.isfinite(payload), "payload unknown")
+    if not any(getattr(t, "uses_field_current", False) for t in model.terms):
+        weak = np.nan_to_num(kin.i_hf) < cfg.weak_field_fraction * cfg.hoist_field_nominal_a
+        mark(weak, "lowering with the weak hoist field (K_H identified at the hoisting field)")
+    mark(np.nan_to_num(kin.i_h) < cfg.min_rope_current_a, "hoist rope slack")
+    from shoveld.cycle.offline import label_phases
+    from shoveld.cycle.phases import DIG, DUMP
+
+    phases = label_phases(kin)
+    mark(phases == DIG, "digging (bank forces are not in the model)")
+    mark(phases == DUMP, "dumping (payload leaving the dipper)")
+    use = reasons == ""
+    static = use & (np.abs(np.degrees(np.nan_to_num(kin.thd))) < cfg.static_rate_deg_s) & (
+        np.abs(np.nan_to_num(kin.dd)) < cfg.static_crowd_m_s) & (
+        np.abs(np.degrees(np.nan_to_num(kin.thdd))) < cfg.static_acc_deg_s2)
+    excluded = Counter(str(r) for r in reasons[~use])
+    return FileData(table.source, kin, payload, use, static, excluded)
+
+
+def integrated_autocorrelation(r: np.ndarray, max_lag: int = 200) -> float:
+    """1 + 2 sum of the residual autocorrelation (until it falls below 0.05).
+
+    Samples at 50 Hz are not independent; ordinary least-squares standard errors
+    would be too small by about the square root of this factor.
+    """
+    r = r - r.mean()
+    var = float(r @ r)
+    if var <= 0 or len(r) < 10:
+        return 1.0
+    tau = 1.0
+    for k in range(1, min(max_lag, len(r) // 4)):
+        rho = float(r[:-k] @ r[k:]) / var
+        if rho < 0.05:
+            break
+        tau += 2.0 * rho
+    return tau
+
+
+@dataclass
+class StageResult:
+    name: str
+    params: list[str]
+    samples: int
+    condition_number: float
+    residual_rms: dict[str, float]
+
+
+def _solve(a: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """Least squares with column scaling; returns p, (A^T A)^-1, cond, tau."""
+    scale = np.linalg.norm(a, axis=0)
+    scale[scale == 0] = 1.0
+    an = a / scale
+    p_n, *_ = np.linalg.lstsq(an, y, rcond=None)
+    sv = np.linalg.svd(an, compute_uv=False)
+    cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf
+    inv = np.linalg.pinv(an.T @ an)
+    return p_n / scale, inv / np.outer(scale, scale), cond, 1.0
+
+
+REFERENCE_PARAM = "K_H"
+"""The equations are divided by this parameter before fitting (see ``_solve_normalized``)."""
+
+
+def _solve_normalized(wn: np.ndarray, yn: np.ndarray, ref: int
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Fit with the reference column moved to the right-hand side.
+
+    The equations are homogeneous and the hoist current is measured with noise.
+    Left in the regressor, that noise acts like a ridge penalty on the whole
+    parameter vector and shrinks it (about 5 % on simulated trials). Divided by
+    K_H, the noisy current becomes the response and the known payload term fixes
+    the scale: theta = (p_j / K_H, 1 / K_H). p and its covariance follow by the
+    delta method.
+    """
+    n_eq = yn.shape[1]
+    w_ref = wn[:, :, ref]
+    others = [j for j in range(wn.shape[2]) if j != ref]
+    a = np.concatenate([wn[:, :, others], -yn[:, :, None]], axis=2).reshape(-1, len(others) + 1)
+    b = -w_ref.reshape(-1)
+    theta, inv, _, _ = _solve(a, b)
+    r_theta = (a @ theta - b).reshape(-1, n_eq)
+    s2 = float(np.sum(r_theta**2)) / max(1, a.shape[0] - len(theta))
+    tau = max(integrated_autocorrelation(r_theta[:, 0]), integrated_autocorrelation(r_theta[:, 1]))
+    cov_t = inv * s2 * tau
+    k_ref = 1.0 / theta[-1]
+    p = np.empty(wn.shape[2])
+    p[others] = theta[:-1] * k_ref
+    p[ref] = k_ref
+    jac = np.zeros((len(p), len(theta)))
+    for i, j in enumerate(others):
+        jac[j, i] = k_ref
+        jac[j, -1] = -theta[i] * k_ref**2
+    jac[ref, -1] = -(k_ref**2)
+    cov = jac @ cov_t @ jac.T
+    r = r_theta * k_ref
+    return p, cov, r
+
+
+@dataclass
+class Calibrator:
+    """Identify the parameters of ``model`` from calibration trials (fit/predict style)."""
+
+    model: Model = field(default_factory=Model.from_names)
+    method: str = "staged"
+    exclusion: ExclusionConfig = field(default_factory=ExclusionConfig)
+    window_s: float = 0.5
+    files_: list[FileData] = field(default_factory=list, init=False)
+    params_: ModelParams | None = field(default=None, init=False)
+    stages_: list[StageResult] = field(default_factory=list, init=False)
+
+    def prepare(self, tables: list[SignalsTable]) -> list[FileData]:
+        return [exclusion_masks(t, self.model, self.exclusion, self.window_s) for t in tables]
+
+    def _rows(self, files: list[FileData], which: str
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Stacked (W + m Psi), y = -m phi, and the equation index, for chosen samples."""
+        ws, ys = [], []
+        for f in files:
+            mask = f.static if which == "static" else f.use
+            if which != "static":
+                mask = f.use & ~f.static
+            if not mask.any():
+                continue
+            k = f.kin.take(mask)
+            w, phi, psi = self.model.regressor(k)
+            m = f.payload[mask][:, None, None]
+            w = w + m * psi
+            y = -m[:, :, 0] * phi
+            if which != "static":
+                # Near standstill the sign of a noisy rate is a coin toss: Coulomb friction
+                # is undetermined there, so those equation rows carry no information.
+                ex = self.exclusion
+                slow = np.stack([np.abs(k.thd) < np.radians(ex.friction_min_rate_deg_s),
+                                 np.abs(k.dd) < ex.friction_min_crowd_m_s], axis=1)
+                slow &= ~f.static[mask][:, None]
+                w = np.where(slow[:, :, None], 0.0, w)
+                y = np.where(slow, 0.0, y)
+            ws.append(w)
+            ys.append(y)
+        if not ws:
+            return np.zeros((0, 2, len(self.model.param_names))), np.zeros((0, 2)), np.zeros(0)
+        return np.concatenate(ws), np.concatenate(ys), np.zeros(0)
+
+    def fit(self, tables: list[SignalsTable]) -> Calibrator:
+        self.files_ = self.prepare(tables)
+        names = self.model.param_names
+        w_all, y_all, _ = self._rows(self.files_, "all")
+        if len(w_all) < 10:
+            raise ValueError("fewer than 10 usable samples after exclusions: "
+                             + "; ".join(f"{f.name}: {dict(f.excluded)}" for f in self.files_))
+        known = [f.payload[f.use] for f in self.files_]
+        loads = np.unique(np.round(np.concatenate(known)))
+        if not np.any(loads > 0):
+            raise ValueError("no sample with a known non-zero payload: the equations are "
+                             "homogeneous, a known-load trial is needed to fix the scale")
+        sigma = np.array([1e5, 1e4])
+        static_names = [n for t in self.model.terms for n in
+                        getattr(t, "static_params", STATIC_PARAMS) if n in t.params]
+        p = np.zeros(len(names))
+        for _ in range(2):  # second pass reweights with the first pass's residual RMS
+            self.stages_ = []
+            cov = np.zeros((len(names), len(names)))
+            if self.method == "staged":
+                w_s, y_s, _ = self._rows(self.files_, "static")
+                si = [names.index(n) for n in static_names]
+                di = [i for i in range(len(names)) if i not in si]
+                if len(w_s) < 4 * len(si):
+                    raise ValueError(f"only {len(w_s)} static samples: the staged method needs "
+                                     "static poses (or use method='joint')")
+                p_s, cov_s = self._stage("static (gravity)", w_s, y_s, si, sigma, None)
+                p[si] = p_s
+                cov[np.ix_(si, si)] = cov_s
+                w_d, y_d, _ = self._rows(self.files_, "dynamic")
+                y_d = y_d - w_d[:, :, si] @ p_s
+                p_d, cov_d = self._stage("dynamic", w_d, y_d, di, sigma, None)
+                p[di] = p_d
+                cov[np.ix_(di, di)] = cov_d
+            elif self.method == "joint":
+                idx = list(range(len(names)))
+                p, cov = self._stage("joint", w_all, y_all, idx, sigma, None)
+            else:
+                raise ValueError(f"unknown method {self.method!r}; use 'staged' or 'joint'")
+            res = (w_all @ p) - y_all
+            sigma = np.sqrt(np.mean(res**2, axis=0))
+        w_all_n = w_all / sigma[None, :, None]
+        a = w_all_n.reshape(-1, len(names))
+        an = a / np.where(np.linalg.norm(a, axis=0) > 0, np.linalg.norm(a, axis=0), 1.0)
+        sv = np.linalg.svd(an, compute_uv=False)
+        cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf
+        hyper = {t.name: dict(t.hyper) for t in self.model.terms if t.hyper}
+        excluded: dict[str, Any] = {}
+        for f in self.files_:
+            excluded[f.name] = {"used": int(f.use.sum()), "static": int(f.static.sum()),
+                                **{k: int(v) for k, v in f.excluded.items()}}
+        fit: dict[str, Any] = {
+            "method": self.method, "samples": int(len(w_all)),
+            "condition_number": cond,
+            "residual_rms": {eq: float(s) for eq, s in zip(EQUATIONS, sigma, strict=True)},
+            "stages": {s.name: {"params": s.params, "samples": s.samples,
+                                "condition_number": s.condition_number,
+                                "residual_rms": s.residual_rms} for s in self.stages_},
+            "excluded": excluded,
+        }
+        self.params_ = ModelParams(
+            terms=self.model.term_names, names=names, values=p,
+            stderr=np.sqrt(np.clip(np.diag(cov), 0, None)), cov=cov,
+            noise={eq: float(s) for eq, s in zip(EQUATIONS, sigma, strict=True)},
+            hyper=hyper, fit=fit)
+        return self
+
+    def _stage(self, name: str, w: np.ndarray, y: np.ndarray, idx: list[int],
+               sigma: np.ndarray, _: Any) -> tuple[np.ndarray, np.ndarray]:
+        names = self.model.param_names
+        wn = w[:, :, idx] / sigma[None, :, None]
+        yn = y / sigma[None, :]
+        ref = names.index(REFERENCE_PARAM) if REFERENCE_PARAM in names else -1
+        if ref in idx:
+            p, cov, r = _solve_normalized(wn, yn, idx.index(ref))
+        else:
+            a = wn.reshape(-1, len(idx))
+            b = yn.reshape(-1)
+            p, inv, _, _ = _solve(a, b)
+            r = (a @ p - b).reshape(-1, 2)
+            s2 = float(np.sum(r**2)) / max(1, a.shape[0] - len(idx))
+            tau = max(integrated_autocorrelation(r[:, 0]), integrated_autocorrelation(r[:, 1]))
+            cov = inv * s2 * tau
+        a = wn.reshape(-1, len(idx))
+        an = a / np.where(np.linalg.norm(a, axis=0) > 0, np.linalg.norm(a, axis=0), 1.0)
+        sv = np.linalg.svd(an, compute_uv=False)
+        cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf
+        rms = np.sqrt(np.mean(r**2, axis=0)) * sigma
+        self.stages_.append(StageResult(name, [self.model.param_names[i] for i in idx],
+                                        int(w.shape[0]), cond,
+                                        {eq: float(v) for eq, v in zip(EQUATIONS, rms,
+                                                                        strict=True)}))
+        return p, cov

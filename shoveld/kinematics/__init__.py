@@ -1,0 +1,1 @@
+"""Joint rates and accelerations: zero-phase offline, Kalman-filtered live."""

@@ -1,0 +1,77 @@
+"""The shovel model: an ordered set of named terms and the regressor they build."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from typing import Any
+
+import numpy as np
+
+from shoveld.model.kin import Kinematics
+from shoveld.model.terms import BASE_TERMS, TERMS, Term, payload_phi
+
+EQUATIONS: tuple[str, str] = ("handle", "crowd")
+"""Residual channels: handle-rotation torque (N m) and crowd force (N)."""
+
+
+class Model:
+    """The base model plus any extension terms, in a fixed order."""
+
+    def __init__(self, terms: Sequence[Term]) -> None:
+        names = [t.name for t in terms]
+        if len(set(names)) != len(names):
+            raise ValueError(f"duplicate terms in {names}")
+        self.terms: list[Term] = list(terms)
+        self.param_names: list[str] = [p for t in self.terms for p in t.params]
+        self.param_units: list[str] = [u for t in self.terms for u in t.units]
+
+    @classmethod
+    def from_names(cls, effects: Iterable[str] = (),
+                   hyper: dict[str, dict[str, Any]] | None = None) -> Model:
+        """The base terms followed by the named extension terms."""
+        hyper = hyper or {}
+        names = list(BASE_TERMS) + [e for e in effects if e not in BASE_TERMS]
+        unknown = [n for n in names if n not in TERMS]
+        if unknown:
+            raise ValueError(f"unknown model term(s) {unknown}; known: {sorted(TERMS)}")
+        return cls([TERMS[n](**hyper.get(n, {})) for n in names])
+
+    @property
+    def term_names(self) -> list[str]:
+        return [t.name for t in self.terms]
+
+    @property
+    def effects(self) -> list[str]:
+        """The terms beyond the base model."""
+        return [t.name for t in self.terms if not t.base]
+
+    def transform(self, cols: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        for t in self.terms:
+            cols = t.transform(cols)
+        return cols
+
+    def regressor(self, k: Kinematics) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """W (N,2,P), phi (N,2) and Psi (N,2,P) with e = W p + m (phi + Psi p)."""
+        n = len(k)
+        ws, psis = [], []
+        for t in self.terms:
+            w = t.columns(k)
+            ws.append(w)
+            ps = t.payload_columns(k)
+            psis.append(ps if ps is not None else np.zeros_like(w))
+        empty = np.zeros((n, 2, 0))
+        w_all = np.concatenate(ws, axis=2) if ws else empty
+        psi_all = np.concatenate(psis, axis=2) if psis else empty
+        return w_all, payload_phi(k), psi_all
+
+    def payload_equations(self, k: Kinematics, p: np.ndarray
+                          ) -> tuple[np.ndarray, np.ndarray]:
+        """(a, b), each (N, 2), such that the payload m satisfies a * m = b."""
+        w, phi, psi = self.regressor(k)
+        return phi + psi @ p, -(w @ p)
+
+    def residual(self, k: Kinematics, p: np.ndarray, m: np.ndarray | float) -> np.ndarray:
+        """(N, 2) equation residuals for parameters p and payload m."""
+        w, phi, psi = self.regressor(k)
+        m = np.broadcast_to(np.asarray(m, dtype=float), (len(k),))[:, None]
+        return w @ p + m * (phi + psi @ p)

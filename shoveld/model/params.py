@@ -1,0 +1,156 @@
+"""Identified model parameters and their TOML file (``shoveld-params/1``).
+
+The file records which terms the model has (so the same model is rebuilt by
+``estimate`` and the daemon), every parameter with its standard error, the
+covariance, and the residual noise per equation that the live payload filter
+uses as its measurement noise.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from shoveld.model.model import EQUATIONS, Model
+
+PARAMS_FORMAT = "shoveld-params/1"
+
+
+class ParamsFileError(ValueError):
+    """A params file that cannot be used, with the file and key named."""
+
+
+@dataclass
+class ModelParams:
+    """A model (its term names and hyper-parameters) with identified values."""
+
+    terms: list[str]
+    names: list[str]
+    values: np.ndarray
+    stderr: np.ndarray
+    cov: np.ndarray
+    noise: dict[str, float]
+    """Residual RMS per equation on the calibration data (N m, N)."""
+    hyper: dict[str, dict[str, Any]] = field(default_factory=dict)
+    fit: dict[str, Any] = field(default_factory=dict)
+
+    def model(self) -> Model:
+        m = Model.from_names([t for t in self.terms], self.hyper)
+        if m.param_names != self.names:
+            raise ParamsFileError(
+                f"parameters {self.names} do not match the terms' parameters {m.param_names}")
+        return m
+
+    def get(self, name: str) -> float:
+        return float(self.values[self.names.index(name)])
+
+    def as_dict(self) -> dict[str, float]:
+        return {n: float(v) for n, v in zip(self.names, self.values, strict=True)}
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        if math.isnan(v):
+            return "nan"
+        if math.isinf(v):
+            return "inf" if v > 0 else "-inf"
+        return repr(v)
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    if isinstance(v, np.generic):
+        return _toml_value(v.item())
+    raise TypeError(f"cannot write {type(v).__name__} to TOML")
+
+
+def _table(lines: list[str], header: str, d: dict[str, Any]) -> None:
+    lines.append(f"\n[{header}]")
+    for k, v in d.items():
+        if isinstance(v, dict):
+            continue
+        lines.append(f"{k} = {_toml_value(v)}")
+    for k, v in d.items():
+        if isinstance(v, dict):
+            _table(lines, f"{header}.{k}", v)
+
+
+def save_params(path: str | Path, p: ModelParams, units: list[str] | None = None) -> None:
+    units = units or p.model().param_units
+    lines = [f'format = "{PARAMS_FORMAT}"',
+             f"terms = {_toml_value(p.terms)}"]
+    for n, v, se, u in zip(p.names, p.values, p.stderr, units, strict=True):
+        _table(lines, f"params.{n}", {"value": float(v), "stderr": float(se), "unit": u})
+    _table(lines, "noise", {k: float(v) for k, v in p.noise.items()})
+    for term, h in p.hyper.items():
+        if h:
+            _table(lines, f"hyper.{term}", h)
+    if p.fit:
+        _table(lines, "fit", p.fit)
+    _table(lines, "covariance", {"names": p.names,
+                                 "matrix": [[float(x) for x in row] for row in p.cov]})
+    Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def load_params(path: str | Path) -> ModelParams:
+    """Read a params file; every fault names the file and the key."""
+    spath = str(path)
+    try:
+        doc = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+    except OSError as e:
+        raise ParamsFileError(f"{spath}: cannot read: {e.strerror}") from None
+    except tomllib.TOMLDecodeError as e:
+        raise ParamsFileError(f"{spath}: not valid TOML: {e}") from None
+
+    def need(d: dict[str, Any], key: str, where: str, typ: type | tuple[type, ...]) -> Any:
+        if key not in d:
+            raise ParamsFileError(f"{spath}: missing key '{where}{key}'")
+        if not isinstance(d[key], typ):
+            raise ParamsFileError(f"{spath}: key '{where}{key}' has the wrong type "
+                                  f"({type(d[key]).__name__})")
+        return d[key]
+
+    fmt = need(doc, "format", "", str)
+    if fmt != PARAMS_FORMAT:
+        raise ParamsFileError(f"{spath}: key 'format' is {fmt!r}, expected {PARAMS_FORMAT!r}")
+    terms = need(doc, "terms", "", list)
+    hyper = doc.get("hyper", {})
+    try:
+        model = Model.from_names(terms, hyper)
+    except ValueError as e:
+        raise ParamsFileError(f"{spath}: key 'terms': {e}") from None
+    params = need(doc, "params", "", dict)
+    values, stderr = [], []
+    for n in model.param_names:
+        entry = need(params, n, "params.", dict)
+        values.append(float(need(entry, "value", f"params.{n}.", (int, float))))
+        stderr.append(float(entry.get("stderr", math.nan)))
+    extra = set(params) - set(model.param_names)
+    if extra:
+        raise ParamsFileError(f"{spath}: keys {sorted('params.' + e for e in extra)} belong to "
+                              f"no term in 'terms' {terms}")
+    noise_d = need(doc, "noise", "", dict)
+    noise = {eq: float(need(noise_d, eq, "noise.", (int, float))) for eq in EQUATIONS}
+    for eq, v in noise.items():
+        if not (math.isfinite(v) and v > 0):
+            raise ParamsFileError(f"{spath}: key 'noise.{eq}' must be a positive number")
+    cov_d = doc.get("covariance", {})
+    n = len(values)
+    cov = np.diag(np.square(np.nan_to_num(stderr)))
+    if cov_d.get("names") == model.param_names:
+        c = np.asarray(cov_d.get("matrix"), dtype=float)
+        if c.shape == (n, n):
+            cov = c
+    return ModelParams(terms=list(model.term_names), names=model.param_names,
+                       values=np.asarray(values), stderr=np.asarray(stderr), cov=cov,
+                       noise=noise, hyper={k: dict(v) for k, v in hyper.items()},
+                       fit=dict(doc.get("fit", {})))

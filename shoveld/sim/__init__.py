@@ -1,0 +1,1 @@
+"""The simulated shovel: plant, scenarios, sensor noise and hidden effects."""
