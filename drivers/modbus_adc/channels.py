@@ -18,11 +18,9 @@ emulator puts in its registers, so driver and emulator share one set of numbers.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
-
-from shoveld.signals.columns import BY_NAME
 
 #: Signals-table columns an ADC channel may feed.
 ADC_COLUMNS: tuple[str, ...] = (
@@ -222,13 +220,3 @@ class ChannelMap:
             if 0 <= i < count and v is not None and not math.isnan(v):
                 words[i] = c.to_word(v)
         return words
-
-
-def plausible_range(name: str) -> tuple[float, float]:
-    """The signals table's plausible range for a channel's column (unit check)."""
-    col = BY_NAME[name]
-    return col.lo, col.hi
-
-
-def channel_names(channels: Iterable[Channel]) -> list[str]:
-    return [c.name for c in channels]
