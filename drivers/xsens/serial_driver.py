@@ -1,0 +1,343 @@
+"""Xsens MTi driver over a serial port (RS-232/RS-422/USB-serial), Xbus protocol.
+
+``open()`` walks the documented configuration sequence, each step with a timeout
+and a clear :class:`DeviceError`:
+
+1. open the port, drop stale input; answer any WakeUp (0x3E) with WakeUpAck (0x3F)
+   (a device that just powered up enters Config state if acknowledged within 500 ms,
+   MTi documentation "States");
+2. GoToConfig (0x30) -> GoToConfigAck (0x31), resent a few times because a streaming
+   device may be mid-packet; silence or noise here means a wrong baud rate or a
+   device that is off, and says so;
+3. ReqDID (0x00) -> DeviceID (0x01) and ReqFWRev (0x12) -> FirmwareRev (0x13), logged
+   and published in ``health.extra``;
+4. SetOutputConfiguration (0xC0) for exactly what the loop needs - EulerAngles or
+   Quaternion, RateOfTurn, Acceleration at ``rate_hz``, PacketCounter, SampleTimeFine
+   and StatusWord in every packet - and check the acknowledgement (0xC1);
+5. GoToMeasurement (0x10) -> 0x11.
+
+An Error (0x42) answer to any step raises with the decoded error code. In
+measurement, ``read()`` decodes MTData2 into :class:`Reading` objects, counts gaps in
+the packet counter as ``health.extra["dropped_packets"]``, and raises (so that
+``Driver.run`` reconnects and reconfigures) when valid data stops for
+``data_timeout_s`` or the device restarts (a WakeUp in the stream).
+
+Not confirmed from vendor documents and therefore configurable: whether a given MTi
+model accepts a particular ``rate_hz`` (the device's acknowledgement is checked and
+a different rate is logged), and the device's serial framing other than 8N1 (the
+default here; legacy devices used 8N2 - ``stopbits`` is configurable).
+"""
+
+from __future__ import annotations
+
+import logging
+import struct
+import time
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import serial
+
+from drivers.base import DeviceError, Driver, Reading, Sink
+from drivers.xsens.mtdata2 import (
+    FRAME_BY_NAME,
+    MAX_FREQUENCY,
+    PRECISION_BY_NAME,
+    TYPE_MASK,
+    XDI,
+    decode_mtdata2,
+    decode_output_configuration,
+    encode_output_configuration,
+    item_label,
+)
+from drivers.xsens.orientation import quat_to_euler_deg
+from drivers.xsens.xbus import MID, MID_NAMES, XbusMessage, XbusParser, describe_error, encode_frame
+
+log = logging.getLogger(__name__)
+
+BAUD_RATES = (4800, 9600, 14400, 19200, 28800, 38400, 57600, 115200, 230400, 460800, 921600,
+              2000000, 3686400, 4000000)
+"""Baud rates of the MTi SetBaudrate table (MT Low Level Communication Protocol)."""
+
+VALUE_KEYS = ("roll_deg", "pitch_deg", "yaw_deg", "gyr_x", "gyr_y", "gyr_z", "acc_x", "acc_y",
+              "acc_z", "packet_counter", "sample_time_fine", "status_word")
+SAMPLE_TIME_FINE_S = 1e-4
+"""SampleTimeFine counts a 10 kHz clock (MTi documentation; CAN 'SampleTime' note)."""
+
+
+def firmware_text(data: bytes) -> str:
+    """FirmwareRev data: major, minor, revision, and (newer firmware) build and SVN revision."""
+    if len(data) < 3:
+        return data.hex()
+    text = f"{data[0]}.{data[1]}.{data[2]}"
+    if len(data) >= 11:
+        build, rev = struct.unpack_from(">II", data, 3)
+        text += f" build {build} rev {rev}"
+    return text
+
+
+class MtiSerialDriver(Driver):
+    """One Xsens MTi on a serial port; emits roll/pitch/yaw, rates, accelerations."""
+
+    CONFIG_KEYS: tuple[str, ...] = (
+        "name", "port", "baudrate", "rate_hz", "orientation", "precision", "coordinate_frame",
+        "stopbits", "command_timeout_s", "data_timeout_s", "read_timeout_s", "backoff_s")
+
+    def __init__(self, name: str = "mti", port: str = "/dev/ttyUSB0", baudrate: int = 115200,
+                 rate_hz: int = 100, orientation: str = "euler", precision: str = "float32",
+                 coordinate_frame: str = "ENU", stopbits: int = 1,
+                 command_timeout_s: float = 1.0, data_timeout_s: float = 1.0,
+                 read_timeout_s: float = 0.05, clock: Callable[[], float] = time.monotonic,
+                 backoff_s: tuple[float, float] = (0.2, 5.0),
+                 serial_factory: Callable[..., serial.Serial] = serial.Serial) -> None:
+        super().__init__(name, clock=clock, backoff_s=backoff_s)
+        _check("port", port, isinstance(port, str) and bool(port), "a device path")
+        _check("baudrate", baudrate, baudrate in BAUD_RATES, f"one of {BAUD_RATES}")
+        _check("rate_hz", rate_hz, isinstance(rate_hz, int) and 1 <= rate_hz <= 2000,
+               "an integer in 1..2000 Hz")
+        _check("orientation", orientation, orientation in ("euler", "quaternion"),
+               "'euler' or 'quaternion'")
+        _check("precision", precision, precision in PRECISION_BY_NAME,
+               f"one of {sorted(PRECISION_BY_NAME)}")
+        _check("coordinate_frame", coordinate_frame, coordinate_frame in FRAME_BY_NAME,
+               f"one of {sorted(FRAME_BY_NAME)}")
+        _check("stopbits", stopbits, stopbits in (1, 2), "1 or 2")
+        for key, v in (("command_timeout_s", command_timeout_s),
+                       ("data_timeout_s", data_timeout_s), ("read_timeout_s", read_timeout_s)):
+            _check(key, v, isinstance(v, (int, float)) and 0 < v <= 60, "seconds in (0, 60]")
+        self.port = port
+        self.baudrate = baudrate
+        self.rate_hz = rate_hz
+        self.orientation = orientation
+        self.precision = precision
+        self.coordinate_frame = coordinate_frame
+        self.stopbits = stopbits
+        self.command_timeout_s = float(command_timeout_s)
+        self.data_timeout_s = float(data_timeout_s)
+        self.read_timeout_s = float(read_timeout_s)
+        self.serial_factory = serial_factory
+        self.device_id: int | None = None
+        self.firmware: str | None = None
+        self.output_configuration: list[tuple[int, int]] = []
+        self._ser: serial.Serial | None = None
+        self._parser = XbusParser()
+        self._counted = (0, 0)
+        self._prev_counter: int | None = None
+        self._last_valid = 0.0
+        self.health.extra.setdefault("dropped_packets", 0)
+        self.health.extra.setdefault("device_errors", 0)
+
+    @classmethod
+    def from_config(cls, cfg: Mapping[str, Any], **kwargs: Any) -> MtiSerialDriver:
+        """Build from a config mapping; ValueError names the first bad or unknown key."""
+        unknown = sorted(set(cfg) - set(cls.CONFIG_KEYS))
+        if unknown:
+            raise ValueError(f"mti config: unknown key '{unknown[0]}' (known: "
+                             f"{', '.join(cls.CONFIG_KEYS)})")
+        if "port" not in cfg:
+            raise ValueError("mti config: missing key 'port' (serial device path)")
+        args = dict(cfg)
+        if "backoff_s" in args:
+            b = args["backoff_s"]
+            ok = (isinstance(b, (list, tuple)) and len(b) == 2
+                  and all(isinstance(x, (int, float)) and x > 0 for x in b) and b[0] <= b[1])
+            _check("backoff_s", b, ok, "[initial, maximum] seconds")
+            args["backoff_s"] = (float(b[0]), float(b[1]))
+        return cls(**args, **kwargs)
+
+    # --- transport ------------------------------------------------------------------
+
+    def _where(self) -> str:
+        return f"{self.port} at {self.baudrate} baud"
+
+    def _write(self, mid: int, data: bytes = b"") -> None:
+        if self._ser is None:
+            raise DeviceError(f"MTi port {self.port} is not open")
+        try:
+            self._ser.write(encode_frame(mid, data))
+            self._ser.flush()
+        except (OSError, serial.SerialException) as e:
+            raise DeviceError(f"MTi on {self.port} disconnected: {e}") from e
+
+    def _account(self) -> None:
+        """Move the parser's loss counters into health (they survive reconnects)."""
+        rb, bf = self._parser.rejected_bytes, self._parser.bad_frames
+        self.health.rejected_bytes += rb - self._counted[0]
+        self.health.bad_frames += bf - self._counted[1]
+        self._counted = (rb, bf)
+
+    def _receive(self) -> list[XbusMessage]:
+        if self._ser is None:
+            raise DeviceError(f"MTi port {self.port} is not open")
+        try:
+            data = self._ser.read(max(1, self._ser.in_waiting))
+        except (OSError, serial.SerialException) as e:
+            raise DeviceError(f"MTi on {self.port} disconnected: {e}") from e
+        msgs = self._parser.feed(data) if data else []
+        self._account()
+        return msgs
+
+    def _command(self, mid: int, data: bytes, expect: int, retries: int = 1) -> XbusMessage:
+        """Send a request and wait for its acknowledgement; handle WakeUp and Error."""
+        name = MID_NAMES.get(mid, f"0x{mid:02X}")
+        rejected0 = self._parser.rejected_bytes
+        seen = 0
+        deadline = time.monotonic() + self.command_timeout_s
+        resend_every = self.command_timeout_s / max(1, retries)
+        next_send = 0.0
+        while True:
+            now = time.monotonic()
+            if now >= deadline:
+                break
+            if now >= next_send:
+                self._write(mid, data)
+                next_send = now + resend_every
+            for msg in self._receive():
+                seen += 1
+                if msg.mid == expect:
+                    return msg
+                if msg.mid == MID.ERROR:
+                    self.health.extra["device_errors"] += 1
+                    raise DeviceError(f"MTi on {self.port} answered {name} with error "
+                                      f"{describe_error(msg.data)}")
+                if msg.mid == MID.WAKEUP:
+                    log.info("%s: WakeUp from MTi on %s, acknowledging", self.name, self.port)
+                    self._write(MID.WAKEUP_ACK)
+        noise = self._parser.rejected_bytes - rejected0
+        if seen == 0:
+            extra = f" ({noise} bytes of noise received)" if noise else ""
+            raise DeviceError(f"no answer from MTi on {self._where()}: wrong baud rate or "
+                              f"device off?{extra}")
+        raise DeviceError(f"MTi on {self.port} did not acknowledge {name} within "
+                          f"{self.command_timeout_s:g} s ({seen} other messages received)")
+
+    # --- Driver interface ---------------------------------------------------------------
+
+    def requested_outputs(self) -> list[tuple[int, int]]:
+        """The (XDI, frequency) list sent with SetOutputConfiguration."""
+        prec = PRECISION_BY_NAME[self.precision]
+        frame = FRAME_BY_NAME[self.coordinate_frame]
+        ori = XDI.EULER_ANGLES if self.orientation == "euler" else XDI.QUATERNION
+        return [(XDI.PACKET_COUNTER, MAX_FREQUENCY), (XDI.SAMPLE_TIME_FINE, MAX_FREQUENCY),
+                (ori | frame | prec, self.rate_hz), (XDI.ACCELERATION | prec, self.rate_hz),
+                (XDI.RATE_OF_TURN | prec, self.rate_hz), (XDI.STATUS_WORD, MAX_FREQUENCY)]
+
+    def open(self) -> None:
+        self.close()
+        try:
+            self._ser = self.serial_factory(
+                self.port, self.baudrate, timeout=self.read_timeout_s, write_timeout=1.0,
+                stopbits=serial.STOPBITS_TWO if self.stopbits == 2 else serial.STOPBITS_ONE)
+            self._ser.reset_input_buffer()
+        except (OSError, serial.SerialException, ValueError) as e:
+            self._ser = None
+            raise DeviceError(f"cannot open MTi port {self.port}: {e}") from e
+        self._parser.reset()
+        self._command(MID.GOTO_CONFIG, b"", MID.GOTO_CONFIG_ACK, retries=4)
+        did = self._command(MID.REQ_DID, b"", MID.DEVICE_ID)
+        self.device_id = int.from_bytes(did.data, "big") if did.data else None
+        fw = self._command(MID.REQ_FW_REV, b"", MID.FIRMWARE_REV)
+        self.firmware = firmware_text(fw.data)
+        log.info("%s: MTi on %s: device id %s, firmware %s", self.name, self._where(),
+                 f"{self.device_id:08X}" if self.device_id is not None else "?", self.firmware)
+        self.health.extra["device_id"] = (f"{self.device_id:08X}"
+                                          if self.device_id is not None else None)
+        self.health.extra["firmware"] = self.firmware
+        wanted = self.requested_outputs()
+        ack = self._command(MID.SET_OUTPUT_CONFIGURATION, encode_output_configuration(wanted),
+                            MID.OUTPUT_CONFIGURATION)
+        got = {s.xdi: s.frequency for s in decode_output_configuration(ack.data)}
+        missing = [item_label(x) for x, _ in wanted if got.get(x, 0) == 0]
+        if missing:
+            raise DeviceError(f"MTi on {self.port} refused output {', '.join(missing)} "
+                              f"(acknowledged {[item_label(x) for x in got]})")
+        for x, f in wanted:
+            if got[x] != f:
+                log.warning("%s: MTi set %s to %s Hz instead of %s Hz", self.name,
+                            item_label(x), got[x], f)
+        self.output_configuration = sorted(got.items())
+        self.health.extra["output_rate_hz"] = got[wanted[2][0]]
+        self._command(MID.GOTO_MEASUREMENT, b"", MID.GOTO_MEASUREMENT_ACK)
+        self._prev_counter = None
+        self._last_valid = time.monotonic()
+        log.info("%s: MTi on %s measuring at %s Hz", self.name, self.port,
+                 self.health.extra["output_rate_hz"])
+
+    def read(self, sink: Sink) -> None:
+        msgs = self._receive()
+        now = time.monotonic()
+        for msg in msgs:
+            if msg.mid == MID.MTDATA2:
+                self._last_valid = now
+                reading = self.decode(msg.data)
+                if reading is not None:
+                    self.emit(sink, reading)
+            elif msg.mid == MID.ERROR:
+                self.health.extra["device_errors"] += 1
+                self.health.last_error = f"MTi error {describe_error(msg.data)}"
+                log.warning("%s: %s", self.name, self.health.last_error)
+            elif msg.mid == MID.WAKEUP:
+                self._write(MID.WAKEUP_ACK)
+                raise DeviceError(f"MTi on {self.port} restarted (WakeUp); reconfiguring")
+        if now - self._last_valid > self.data_timeout_s:
+            self.health.timeouts += 1
+            raise DeviceError(f"no data from MTi on {self.port} for "
+                              f"{now - self._last_valid:.1f} s")
+
+    def decode(self, payload: bytes) -> Reading | None:
+        """One MTData2 payload -> Reading (quantities the packet lacks are marked invalid)."""
+        t_host = self.clock()
+        values: dict[str, float] = {}
+        quat = None
+        for item in decode_mtdata2(payload):
+            t = item.xdi & TYPE_MASK
+            v = item.value
+            if item.name.endswith("?"):
+                continue
+            if t == XDI.EULER_ANGLES:
+                values["roll_deg"], values["pitch_deg"], values["yaw_deg"] = v
+            elif t == XDI.QUATERNION:
+                quat = v
+            elif t == XDI.RATE_OF_TURN:
+                values["gyr_x"], values["gyr_y"], values["gyr_z"] = v
+            elif t == XDI.ACCELERATION:
+                values["acc_x"], values["acc_y"], values["acc_z"] = v
+            elif t == XDI.PACKET_COUNTER:
+                values["packet_counter"] = float(v)
+                self._count_gap(v)
+            elif t == XDI.SAMPLE_TIME_FINE:
+                values["sample_time_fine"] = float(v)
+            elif t == XDI.STATUS_WORD:
+                values["status_word"] = float(v)
+        if quat is not None and "roll_deg" not in values:
+            values["roll_deg"], values["pitch_deg"], values["yaw_deg"] = quat_to_euler_deg(quat)
+        if not values:
+            return None
+        invalid = frozenset(k for k in VALUE_KEYS if k not in values)
+        stf = values.get("sample_time_fine")
+        return Reading(device=self.name, t_host=t_host, values=values, invalid=invalid,
+                       t_device=stf * SAMPLE_TIME_FINE_S if stf is not None else None)
+
+    def _count_gap(self, counter: int) -> None:
+        prev = self._prev_counter
+        self._prev_counter = counter
+        if prev is None:
+            return
+        gap = (counter - prev - 1) & 0xFFFF
+        if gap and gap < 0x8000:
+            self.health.extra["dropped_packets"] += gap
+        elif gap:
+            log.warning("%s: packet counter jumped back from %d to %d", self.name, prev, counter)
+
+    def close(self) -> None:
+        ser, self._ser = self._ser, None
+        if ser is not None:
+            try:
+                ser.close()
+            except (OSError, serial.SerialException):
+                pass
+
+
+def _check(key: str, value: object, ok: bool, expected: str) -> None:
+    if not ok:
+        raise ValueError(f"mti config: '{key}' must be {expected}, got {value!r}")
