@@ -50,6 +50,7 @@ class ReplayClock:
         self._m0 = time.monotonic()
         self._cond = threading.Condition()
         self._checks: list[SettleCheck] = []
+        self._listeners: list[Callable[[], None]] = []
         self.unsettled_steps = 0
         """Steps whose settle checks did not all pass within ``settle_timeout_s``."""
 
@@ -71,6 +72,16 @@ class ReplayClock:
             self._t = self.now() if start is None else float(start)
             self._m0 = time.monotonic()
             self._cond.notify_all()
+        self._notify()
+
+    def add_listener(self, fn: Callable[[], None]) -> None:
+        """Call ``fn()`` whenever time is moved by :meth:`advance_to` or :meth:`restart`
+        (feeders use it to wake up a ``select`` at once)."""
+        self._listeners.append(fn)
+
+    def _notify(self) -> None:
+        for fn in self._listeners:
+            fn()
 
     def add_settle_check(self, check: SettleCheck) -> None:
         """Register ``check(t) -> bool``; ``advance`` waits until all return True."""
@@ -89,6 +100,7 @@ class ReplayClock:
                 self._t = float(t)
             self._cond.notify_all()
             t = self._t
+        self._notify()
         deadline = time.monotonic() + self.settle_timeout_s
         while True:
             if all(c(t) for c in self._checks):
