@@ -165,6 +165,7 @@ class MtiEmulator:
         self._t0 = clock()
         self._next_k = 0
         self._counter = 0
+        self._drop = 0
         self._requests: queue.Queue[tuple[Callable[[], Any], threading.Event]] = queue.Queue()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -220,6 +221,12 @@ class MtiEmulator:
     def emit_garbage(self, n: int) -> None:
         """Write ``n`` random bytes now (they may contain 0xFA)."""
         self._do(lambda: self._write(self._rng.randbytes(n)))
+
+    def drop_packets(self, n: int) -> None:
+        """Lose the next ``n`` MTData2 packets on the line (the packet counter still advances)."""
+        def drop() -> None:
+            self._drop += n
+        self._do(drop)
 
     def send_error(self, code: int) -> None:
         """Send an Error message with ``code`` now."""
@@ -402,8 +409,12 @@ class MtiEmulator:
         if due - self._next_k > rate:  # far behind (e.g. a stalled host): skip, like a device
             self._next_k = due
         while self._next_k <= due:
-            self._send(MID.MTDATA2, self.packet(self._next_k))
+            payload = self.packet(self._next_k)
             self._next_k += 1
+            if self._drop:
+                self._drop -= 1
+                continue
+            self._send(MID.MTDATA2, payload)
             self.sent_packets += 1
 
     def packet(self, k: int) -> bytes:
