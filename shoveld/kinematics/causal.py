@@ -26,9 +26,9 @@ class JointFilterConfig:
     max_coast_s: float = 0.5
 
 
-HANDLE = JointFilterConfig(meas_std=math.radians(0.03), jerk_std=1.0)
+HANDLE = JointFilterConfig(meas_std=math.radians(0.03), jerk_std=2.0)
 CROWD = JointFilterConfig(meas_std=0.002, jerk_std=4.0)
-SWING = JointFilterConfig(meas_std=math.radians(0.1), jerk_std=1.0)
+SWING = JointFilterConfig(meas_std=math.radians(0.1), jerk_std=2.0)
 
 
 class JointFilter:
@@ -41,10 +41,13 @@ class JointFilter:
         kf.F = np.array([[1.0, dt, 0.5 * dt * dt], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
         kf.H = np.array([[1.0, 0.0, 0.0]])
         kf.R = np.array([[cfg.meas_std**2]])
-        kf.Q = Q_discrete_white_noise(dim=3, dt=dt, var=cfg.jerk_std**2)
+        # filterpy's piecewise model takes the variance of the acceleration change per step.
+        kf.Q = Q_discrete_white_noise(dim=3, dt=dt, var=(cfg.jerk_std * dt) ** 2)
         self.kf = kf
         self._last_t: float | None = None
         self._coast = 0.0
+        self._steady: tuple[float, float, float] | None = None
+        self._prev_p = 0.0
 
     def reset(self, z: float) -> None:
         self.kf.x = np.array([[z], [0.0], [0.0]])
@@ -59,6 +62,9 @@ class JointFilter:
             self._last_t = t
             return z, 0.0, 0.0
         self._last_t = t
+        if self._steady is not None and not math.isnan(z):
+            return self._steady_update(z)
+        self._steady = None
         self.kf.predict()
         if math.isnan(z):
             self._coast += self.dt
@@ -68,5 +74,23 @@ class JointFilter:
         else:
             self._coast = 0.0
             self.kf.update(z)
+            p00 = float(self.kf.P[0, 0])
+            if abs(p00 - self._prev_p) < 1e-9 * p00:
+                # Converged: the gain is constant from here on (steady-state Kalman filter),
+                # so the update needs no matrix algebra until a gap disturbs it.
+                k = self.kf.K
+                self._steady = (float(k[0, 0]), float(k[1, 0]), float(k[2, 0]))
+            self._prev_p = p00
         x = self.kf.x
         return float(x[0, 0]), float(x[1, 0]), float(x[2, 0])
+
+    def _steady_update(self, z: float) -> tuple[float, float, float]:
+        x = self.kf.x
+        dt = self.dt
+        q, v, a = float(x[0, 0]), float(x[1, 0]), float(x[2, 0])
+        q, v = q + v * dt + 0.5 * a * dt * dt, v + a * dt
+        k0, k1, k2 = self._steady  # type: ignore[misc]
+        e = z - q
+        q, v, a = q + k0 * e, v + k1 * e, a + k2 * e
+        x[0, 0], x[1, 0], x[2, 0] = q, v, a
+        return q, v, a

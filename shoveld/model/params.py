@@ -9,6 +9,7 @@ uses as its measurement noise.
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -73,15 +74,20 @@ def _toml_value(v: Any) -> str:
     raise TypeError(f"cannot write {type(v).__name__} to TOML")
 
 
+def _key(k: str) -> str:
+    """A bare TOML key where allowed, else a quoted one."""
+    return k if re.fullmatch(r"[A-Za-z0-9_-]+", k) else _toml_value(k)
+
+
 def _table(lines: list[str], header: str, d: dict[str, Any]) -> None:
     lines.append(f"\n[{header}]")
     for k, v in d.items():
         if isinstance(v, dict):
             continue
-        lines.append(f"{k} = {_toml_value(v)}")
+        lines.append(f"{_key(k)} = {_toml_value(v)}")
     for k, v in d.items():
         if isinstance(v, dict):
-            _table(lines, f"{header}.{k}", v)
+            _table(lines, f"{header}.{_key(k)}", v)
 
 
 def save_params(path: str | Path, p: ModelParams, units: list[str] | None = None) -> None:

@@ -250,7 +250,7 @@ def simulate_cycles(n_passes: int, seed: int = 0, *, payload_range: tuple[float,
             m = float(payloads[k])
         elif truck_target_kg:
             left = truck_target_kg - truck_load
-            m = float(np.clip(rng.normal(0.27, 0.03) * truck_target_kg, 3000.0,
+            m = float(np.clip(rng.normal(0.235, 0.025) * truck_target_kg, 3000.0,
                               min(RATED_PAYLOAD_KG, max(left * 1.08, 3000.0))))
         else:
             m = float(rng.uniform(*payload_range))

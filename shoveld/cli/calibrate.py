@@ -1,0 +1,81 @@
+"""``shoveld calibrate``: identify the model parameters from calibration trials."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+
+from shoveld.cli import CliError
+from shoveld.cli.common import parse_effects, read_tables
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "calibrate", help="identify model parameters from empty and known-load trials",
+        description="Least squares over empty and known-load trials (the known load fixes "
+                    "the scale): static poses give the gravity parameters, moving samples "
+                    "the dynamic ones. Writes a params file and prints the report.")
+    p.add_argument("files", nargs="+", metavar="FILE", help="signals tables")
+    p.add_argument("--out", required=True, help="params file to write (TOML)")
+    p.add_argument("--method", choices=("staged", "joint"), default="staged")
+    p.add_argument("--effects", default="", metavar="NAME,...",
+                   help="extension terms to add to the base model")
+    p.add_argument("--window", type=float, default=0.5,
+                   help="zero-phase smoothing window for rates, s")
+    p.add_argument("--json", action="store_true", help="print the report as JSON")
+    p.set_defaults(func=run)
+
+
+def format_report(params: object) -> str:
+    from shoveld.model.params import ModelParams
+
+    assert isinstance(params, ModelParams)
+    units = params.model().param_units
+    fit = params.fit
+    lines = [f"model terms: {', '.join(params.terms)}",
+             f"method: {fit['method']}, samples used: {fit['samples']}, "
+             f"condition number: {fit['condition_number']:.1f}", "",
+             f"{'parameter':10s} {'value':>14s} {'std err':>12s} {'rel':>7s}  unit"]
+    for n, v, se, u in zip(params.names, params.values, params.stderr, units, strict=True):
+        rel = abs(se / v) * 100 if v else math.inf
+        lines.append(f"{n:10s} {v:14.6g} {se:12.4g} {rel:6.2f}%  {u}")
+    lines.append("")
+    lines.append("residual RMS: " + ", ".join(
+        f"{k} {v:.4g} {'N m' if k == 'handle' else 'N'}" for k, v in fit["residual_rms"].items()))
+    for name, st in fit.get("stages", {}).items():
+        lines.append(f"  stage {name}: {st['samples']} samples, condition "
+                     f"{st['condition_number']:.1f}, residual " + ", ".join(
+                         f"{k} {v:.4g}" for k, v in st["residual_rms"].items()))
+    lines.append("")
+    lines.append("data used and excluded (samples):")
+    for f, ex in fit["excluded"].items():
+        lines.append(f"  {f}: used {ex['used']} (static {ex['static']})")
+        for why, n in ex.items():
+            if why not in ("used", "static"):
+                lines.append(f"    excluded {n:7d}: {why}")
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    from shoveld.identify.calibrate import Calibrator
+    from shoveld.model.model import Model
+    from shoveld.model.params import save_params
+
+    tables = read_tables(args.files)
+    try:
+        model = Model.from_names(parse_effects(args.effects))
+        cal = Calibrator(model=model, method=args.method, window_s=args.window).fit(tables)
+    except ValueError as e:
+        raise CliError(str(e)) from None
+    assert cal.params_ is not None
+    save_params(args.out, cal.params_)
+    if args.json:
+        print(json.dumps({"params": cal.params_.as_dict(),
+                          "stderr": dict(zip(cal.params_.names,
+                                             map(float, cal.params_.stderr), strict=True)),
+                          **cal.params_.fit}))
+    else:
+        print(format_report(cal.params_))
+        print(f"\nwrote {args.out}")
+    return 0

@@ -1,0 +1,70 @@
+"""``shoveld estimate``: payload per pass and per truck from signals tables."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from shoveld.cli.common import read_params, read_tables
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "estimate", help="estimate the payload of every pass in signals tables",
+        description="Runs the live engine over each table: dig-cycle phases, recursive "
+                    "least squares over lift and swing, final at the dump. One line per "
+                    "pass, then the trucks against the target and the 10/10/20 rule.")
+    p.add_argument("files", nargs="+", metavar="FILE")
+    p.add_argument("--params", required=True, help="params file from 'shoveld calibrate'")
+    p.add_argument("--json", action="store_true",
+                   help="one JSON object per pass on stdout; the truck summary as JSON "
+                        "on stderr")
+    p.add_argument("--truck-target", type=float, default=136000.0, help="kg per truck")
+    p.add_argument("--truck-gap", type=float, default=20.0,
+                   help="a pause without digging this long (s) starts a new truck")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from shoveld.engine.loop import EngineConfig
+    from shoveld.engine.offline import estimate_table
+    from shoveld.payload.trucks import rule_101020
+
+    params = read_params(args.params)
+    tables = read_tables(args.files)
+    cfg = EngineConfig(truck_target_kg=args.truck_target, truck_gap_s=args.truck_gap)
+    next_pass, next_truck = 1, 1
+    trucks = []
+    for table in tables:
+        est = estimate_table(table, params, cfg, next_pass, next_truck)
+        for p in est.passes:
+            d = {**p.as_dict(), "file": table.source}
+            if args.json:
+                print(json.dumps(d))
+            elif p.valid:
+                print(f"pass {p.index:3d}  truck {p.truck:3d}  {p.start_s:9.1f}-{p.end_s:9.1f} s"
+                      f"  {p.payload_kg:9.0f} kg +- {p.std_kg:5.0f} kg  ({table.source})")
+            else:
+                print(f"pass {p.index:3d}  truck {p.truck:3d}  {p.start_s:9.1f}-{p.end_s:9.1f} s"
+                      f"  INVALID: {p.reason}  ({table.source})")
+        if est.passes:
+            next_pass = est.passes[-1].index + 1
+        if est.trucks:
+            next_truck = est.trucks[-1].index + 1
+        trucks.extend(est.trucks)
+    summary = {"trucks": [t.as_dict() for t in trucks], "rule_10_10_20": rule_101020(trucks)}
+    if args.json:
+        print(json.dumps(summary), file=sys.stderr)
+    else:
+        print()
+        for t in trucks:
+            d = t.as_dict()
+            print(f"truck {d['truck']:3d}: {d['passes']} passes, {d['total_kg']:9.0f} kg of "
+                  f"{d['target_kg']:.0f} kg ({d['fill_pct']:.1f} %), {d['status']}")
+        r = summary["rule_10_10_20"]
+        if r["trucks"]:
+            print(f"10/10/20: mean {r['mean_pct']} % of target, {r['over_110_pct']} % of trucks "
+                  f"over 110 %, {r['over_120']} over 120 % -> "
+                  f"{'compliant' if r['compliant'] else 'NOT compliant'}")
+    return 0

@@ -1,0 +1,230 @@
+"""The engine: one sample in, phase, live payload, finished passes and trucks out.
+
+This is the only implementation of the payload pipeline. ``shoveld estimate``
+feeds it rows of a table; the daemon feeds it samples assembled from the
+drivers at each tick. Everything it needs is causal.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from shoveld.cycle.phases import DIG, DUMP, ESTIMATING, IDLE, PHASES, PhaseConfig, PhaseMachine
+from shoveld.kinematics.causal import CROWD, HANDLE, SWING, JointFilter
+from shoveld.model.kin import Kinematics
+from shoveld.model.params import ModelParams
+from shoveld.payload.rls import PayloadRls, RlsConfig
+from shoveld.payload.trucks import Truck
+from shoveld.sample import Sample
+
+NEEDED = ("handle_deg", "crowd_m", "hoist1_a", "hoist2_a", "hoist_field_a", "crowd_a")
+"""Signals without which a payload update is not made."""
+
+
+@dataclass(frozen=True)
+class EngineConfig:
+    """Per-site settings of the estimator."""
+
+    rate_hz: float = 50.0
+    truck_target_kg: float = 136000.0
+    truck_gap_s: float = 20.0
+    """A pause this long without digging means the truck was exchanged."""
+    warmup_s: float = 1.0
+    """The joint filters' start-up transient: no phase changes before it has passed."""
+    settle_s: float = 0.4
+    """Samples this soon after leaving the bank are not used (bank contact fades)."""
+    min_samples: int = 40
+    """A pass with fewer valid payload updates is reported invalid."""
+    hoist_field_nominal_a: float = 70.0
+    weak_field_fraction: float = 0.92
+    phases: PhaseConfig = field(default_factory=PhaseConfig)
+    rls: RlsConfig = field(default_factory=RlsConfig)
+
+
+@dataclass
+class LiveEstimate:
+    time_s: float
+    phase: str
+    payload_kg: float
+    std_kg: float
+    valid: bool
+
+
+@dataclass
+class PassResult:
+    """A finished pass: final at the dump."""
+
+    index: int
+    truck: int
+    start_s: float
+    end_s: float
+    payload_kg: float
+    std_kg: float
+    samples: int
+    valid: bool
+    reason: str = ""
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"pass": self.index, "truck": self.truck, "start_s": round(self.start_s, 3),
+                "end_s": round(self.end_s, 3),
+                "payload_kg": None if not self.valid else round(self.payload_kg, 1),
+                "std_kg": None if not self.valid else round(self.std_kg, 1),
+                "samples": self.samples, "valid": self.valid, "reason": self.reason}
+
+
+@dataclass
+class TruckResult:
+    truck: Truck
+    closed: bool
+
+    def as_dict(self) -> dict[str, Any]:
+        return {**self.truck.as_dict(), "closed": self.closed}
+
+
+Event = LiveEstimate | PassResult | TruckResult
+
+
+def _arr(x: float) -> np.ndarray:
+    return np.array([x])
+
+
+class Engine:
+    """Causal payload pipeline for one shovel."""
+
+    def __init__(self, params: ModelParams, cfg: EngineConfig | None = None,
+                 first_pass: int = 1, first_truck: int = 1,
+                 truck_passes: list[dict[str, Any]] | None = None) -> None:
+        self.cfg = cfg or EngineConfig()
+        self.params = params
+        self.model = params.model()
+        self.p = params.values
+        dt = 1.0 / self.cfg.rate_hz
+        self.dt = dt
+        self.f_th = JointFilter(HANDLE, dt)
+        self.f_d = JointFilter(CROWD, dt)
+        self.f_sw = JointFilter(SWING, dt)
+        self.phases = PhaseMachine(self.cfg.phases)
+        self.noise = (params.noise["handle"], params.noise["crowd"])
+        self.rls: PayloadRls | None = None
+        self.pass_index = first_pass - 1
+        self.pass_start = math.nan
+        self.dig_end = math.nan
+        self.invalid_updates = 0
+        self.truck = Truck(first_truck, self.cfg.truck_target_kg, list(truck_passes or []))
+        self.last_dump_t = -math.inf
+        self.last: LiveEstimate | None = None
+        self.t0 = math.nan
+
+    # -- public -----------------------------------------------------------------------
+    def step(self, s: Sample) -> list[Event]:
+        """Process one sample; return the events it produced (always one LiveEstimate)."""
+        events: list[Event] = []
+        t = s.time_s
+        bad = s.invalid
+        th, thd, thdd = self.f_th.update(t, math.nan if "handle_deg" in bad
+                                         else math.radians(s.handle_deg))
+        d, dd, ddd = self.f_d.update(t, math.nan if "crowd_m" in bad else s.crowd_m)
+        sw, swd, swdd = self.f_sw.update(t, math.nan if "swing_deg" in bad
+                                         else math.radians(s.swing_deg))
+        prev = self.phases.phase
+        if math.isnan(self.t0):
+            self.t0 = t
+        if t - self.t0 >= self.cfg.warmup_s:
+            ph = self.phases.update(t, math.degrees(th), math.degrees(thd), math.degrees(swd),
+                                    dd)
+        else:
+            ph = prev
+        if ph != prev:
+            events.extend(self._transition(prev, ph, t))
+        valid = False
+        if ph in ESTIMATING and self.rls is not None:
+            valid = self._update(s, th, thd, thdd, d, dd, ddd, sw, swd, swdd)
+        if self.rls is not None and self.rls.n:
+            est = LiveEstimate(t, PHASES[ph], self.rls.payload_kg, self.rls.std_kg,
+                               valid or ph not in ESTIMATING)
+        else:
+            est = LiveEstimate(t, PHASES[ph], math.nan, math.nan, False)
+        self.last = est
+        events.append(est)
+        return events
+
+    def finish(self) -> list[Event]:
+        """End of data: close the current truck if it has passes."""
+        if self.truck.passes:
+            return [TruckResult(self.truck, closed=True)]
+        return []
+
+    def new_truck(self) -> list[Event]:
+        """Close the current truck now (operator's button, or a dispatch message)."""
+        out: list[Event] = []
+        if self.truck.passes:
+            out.append(TruckResult(self.truck, closed=True))
+            self.truck = Truck(self.truck.index + 1, self.cfg.truck_target_kg)
+        return out
+
+    # -- internals --------------------------------------------------------------------
+    def _transition(self, prev: int, ph: int, t: float) -> list[Event]:
+        out: list[Event] = []
+        if ph == DIG:
+            if t - self.last_dump_t > self.cfg.truck_gap_s:
+                out.extend(self.new_truck())
+            self.pass_index += 1
+            self.pass_start = t
+            self.rls = PayloadRls(self.noise, self.dt, self.cfg.rls)
+            self.invalid_updates = 0
+        elif prev == DIG:
+            self.dig_end = t
+        if ph == DUMP and self.rls is not None:
+            out.extend(self._finish_pass(t))
+        if ph == IDLE and prev != IDLE and self.rls is not None and prev in ESTIMATING:
+            self.rls = None  # the cycle was abandoned before a dump
+        return out
+
+    def _finish_pass(self, t: float) -> list[Event]:
+        rls = self.rls
+        assert rls is not None
+        valid = rls.n >= self.cfg.min_samples
+        reason = "" if valid else (
+            f"only {rls.n} valid samples in lift and swing ({self.invalid_updates} invalid)")
+        pr = PassResult(self.pass_index, self.truck.index, self.pass_start, t, rls.payload_kg,
+                        rls.std_kg, rls.n, valid, reason)
+        self.truck.passes.append(pr.as_dict())
+        self.last_dump_t = t
+        self.rls = None
+        return [pr, TruckResult(self.truck, closed=False)]
+
+    def _update(self, s: Sample, th: float, thd: float, thdd: float, d: float, dd: float,
+                ddd: float, sw: float, swd: float, swdd: float) -> bool:
+        if s.time_s - self.dig_end < self.cfg.settle_s:
+            return False
+        i_h = s.hoist1_a + s.hoist2_a
+        if (any(n in s.invalid for n in NEEDED) or math.isnan(i_h) or math.isnan(s.crowd_a)
+                or math.isnan(th) or math.isnan(d)):
+            self.invalid_updates += 1
+            return False
+        if not any(getattr(t, "uses_field_current", False) for t in self.model.terms) and (
+                s.hoist_field_a < self.cfg.weak_field_fraction * self.cfg.hoist_field_nominal_a):
+            return False
+        boom = math.radians(s.boom_deg) if not math.isnan(s.boom_deg) else math.radians(45.0)
+        k = Kinematics(t=_arr(s.time_s), th=_arr(th), thd=_arr(thd), thdd=_arr(thdd),
+                       d=_arr(d), dd=_arr(dd), ddd=_arr(ddd), boom=_arr(boom), i_h=_arr(i_h),
+                       i_c=_arr(s.crowd_a), i_hf=_arr(s.hoist_field_a), swing=_arr(sw),
+                       swing_rate=_arr(swd), swing_acc=_arr(swdd),
+                       roll=_arr(math.radians(np.nan_to_num(s.roll_deg))),
+                       pitch=_arr(math.radians(np.nan_to_num(s.pitch_deg))))
+        a, b = self.model.payload_equations(k, self.p)
+        assert self.rls is not None
+        self.rls.update((float(a[0, 0]), float(a[0, 1])), (float(b[0, 0]), float(b[0, 1])))
+        return True
+
+
+def run_engine(samples: Iterable[Sample], engine: Engine) -> Iterator[Event]:
+    """Drive an engine over a finite source of samples (offline)."""
+    for s in samples:
+        yield from engine.step(s)
+    yield from engine.finish()

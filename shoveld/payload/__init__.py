@@ -1,0 +1,1 @@
+"""Payload estimation: recursive least squares per pass and truck accumulation."""
