@@ -4,8 +4,8 @@ The drivers configure their devices exactly as the daemon would, so a capture
 holds the device's stream *after* shoveld's configuration, plus the handshake
 itself (serial ``tx``/``rx`` chunks) for replay to answer. Serial drivers record
 through a transport tap (every chunk read and written), Modbus drivers through
-their ``register_log`` hook (every register read and its outcome), CAN through
-python-can's :class:`can.Logger` on a second bus handle.
+their ``register_log`` hook (every register read and its outcome), CAN drivers
+through a bus tap whose frames go to python-can's :class:`can.Logger`.
 
 Configuration (TOML, the daemon's format until it is final)::
 
@@ -35,7 +35,25 @@ from drivers.capture.tap import TappedSerial
 
 log = logging.getLogger(__name__)
 
-CAN_KEYS = ("interface", "channel", "bitrate")
+
+class TappedBus:
+    """A python-can bus whose received frames are also logged (the CAN recording tap)."""
+
+    def __init__(self, bus: Any, log_frame: Callable[[Any], None]) -> None:
+        self._bus = bus
+        self._log = log_frame
+
+    def recv(self, timeout: float | None = None) -> Any:
+        msg = self._bus.recv(timeout=timeout)
+        if msg is not None:
+            self._log(msg)
+        return msg
+
+    def shutdown(self) -> None:
+        self._bus.shutdown()
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._bus, name)
 
 
 class RecordConfigError(ValueError):
@@ -107,14 +125,15 @@ class Recorder:
 
     def __init__(self, config: Mapping[str, Any], out_dir: str | Path, *,
                  clock: Callable[[], float] = time.monotonic, source: str = "shoveld record",
-                 overwrite: bool = False, where: str = "<config>") -> None:
+                 overwrite: bool = False, where: str = "<config>",
+                 time_origin: float | None = None) -> None:
         check_record_config(config, where)
         self.config = config
         self.clock = clock
         inst = config.get("installation")
         installation = _installation(inst, where) if inst is not None else None
         self.writer = CaptureWriter(out_dir, installation=installation, source=source,
-                                    clock=clock, overwrite=overwrite)
+                                    clock=clock, overwrite=overwrite, time_origin=time_origin)
         self.devices: list[_Device] = []
         self._stop = threading.Event()
         try:
@@ -166,24 +185,22 @@ class Recorder:
         return dev
 
     def _build_can(self, dev: _Device, d: dict[str, Any]) -> None:
-        # TODO(xsens): run the MTi CAN driver too once it exists (it may configure the
-        # device); until then the bus is only listened to.
         import can
 
-        kw = {k: d[k] for k in CAN_KEYS if k in d}
-        if "channel" not in kw:
+        from drivers.xsens.can_driver import MtiCanDriver
+
+        args = {k: v for k, v in d.items() if k != "kind"}
+        args.setdefault("name", dev.name)
+        if "channel" not in args:
             raise ValueError("key 'channel' is required (e.g. 'can0')")
-        kw.setdefault("interface", "socketcan")
-        rec = self.writer.add_can(dev.name, dev.kind, channel=kw["channel"],
-                                  interface=kw["interface"], bitrate=kw.get("bitrate"), config=d)
-        bus = can.Bus(**kw)
+        rec = self.writer.add_can(dev.name, dev.kind, channel=args["channel"],
+                                  interface=args.get("interface", "socketcan"),
+                                  bitrate=args.get("bitrate"), config=d)
 
-        def on_msg(msg: can.Message) -> None:
-            rec(msg)
-            dev.readings += 1
+        def factory(**kw: Any) -> Any:
+            return TappedBus(can.Bus(**kw), rec)
 
-        notifier = can.Notifier(bus, [on_msg], timeout=0.1)
-        dev.cleanup += [notifier.stop, bus.shutdown]
+        dev.driver = MtiCanDriver.from_config(args, clock=self.clock, bus_factory=factory)
 
     # -- running -------------------------------------------------------------------------
 
