@@ -16,6 +16,7 @@ Faults to test against:
 * :meth:`go_silent` / :meth:`come_back`: device off / on with the port still there;
 * ``garbage_probability`` / ``corrupt_probability`` / :meth:`emit_garbage`: noise
   between frames and bit flips inside them;
+* ``fail_commands``: answer chosen requests with an Error message;
 * a wrong baud rate: the emulator reads the baud rate the driver set on the pty
   (``tcgetattr`` on the master) and, when it differs from :attr:`baudrate` (or
   ``wrong_baud`` is set), turns its output into byte noise and ignores commands -
@@ -147,6 +148,8 @@ class MtiEmulator:
         self.garbage_probability = garbage_probability
         self.corrupt_probability = corrupt_probability
         self.wrong_baud = False
+        self.fail_commands: dict[int, int] = {}
+        """Message id -> error code to answer that request with (Error 0x42)."""
         self.status_word = status_word
         self.tick_s = tick_s
         self.temperature_c = 25.0
@@ -346,6 +349,9 @@ class MtiEmulator:
 
     def _handle(self, msg: XbusMessage) -> None:
         mid = msg.mid
+        if mid in self.fail_commands:
+            self._send(MID.ERROR, bytes((self.fail_commands[mid],)))
+            return
         if mid == MID.WAKEUP_ACK:
             if self.state == "wakeup":
                 self.state = "config"

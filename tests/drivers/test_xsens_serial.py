@@ -1,0 +1,323 @@
+"""MtiSerialDriver against MtiEmulator over a real pseudo-terminal.
+
+Covers the configuration sequence, values against their source in every precision,
+quaternion output, a signals-table source through the installation geometry, noise and
+corruption, dropped packets, Error messages, a device restart, unplug/replug and a
+silent device with reconnect back-off, and the wrong-baud-rate message.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Callable, Iterator
+
+import numpy as np
+import pytest
+
+from drivers.base import DeviceError, Reading
+from drivers.xsens.mtdata2 import FP1632, MAX_FREQUENCY, NED, XDI
+from drivers.xsens.orientation import gravity_in_sensor
+from drivers.xsens.serial_driver import MtiSerialDriver
+from drivers.xsens.xbus import MID
+from hil_fixtures.mti import MtiEmulator, angles_from_signals
+from shoveld.installation import Installation, wrap_deg
+from shoveld.signals import SignalsTable
+
+
+def source(t: float) -> tuple[float, float, float]:
+    """A swinging, hoisting saddle block: smooth and crossing the yaw wrap."""
+    return (0.5 * math.sin(0.7 * t), 20.0 * math.sin(1.3 * t) - 5.0, wrap_deg(170.0 + 40.0 * t))
+
+
+@pytest.fixture
+def emu() -> Iterator[MtiEmulator]:
+    with MtiEmulator(source, send_wakeup=False) as e:
+        yield e
+
+
+def make_driver(port: str, **kw: object) -> MtiSerialDriver:
+    args: dict[str, object] = {"port": port, "command_timeout_s": 0.4, "data_timeout_s": 0.3,
+                               "backoff_s": (0.05, 0.2)}
+    args.update(kw)
+    return MtiSerialDriver.from_config(args)
+
+
+def collect(drv: MtiSerialDriver, seconds: float) -> list[Reading]:
+    out: list[Reading] = []
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        drv.read(out.append)
+    return out
+
+
+def wait_for(cond: Callable[[], bool], timeout: float = 5.0) -> None:
+    end = time.monotonic() + timeout
+    while not cond():
+        if time.monotonic() > end:
+            raise AssertionError("condition not reached in time")
+        time.sleep(0.01)
+
+
+def ang_err(a: float, b: float) -> float:
+    return abs(wrap_deg(a - b))
+
+
+def test_configuration_sequence_and_identity(emu: MtiEmulator) -> None:
+    drv = make_driver(emu.port)
+    drv.open()
+    try:
+        assert [m for m in emu.commands() if m != MID.WAKEUP_ACK] == [
+            MID.GOTO_CONFIG, MID.REQ_DID, MID.REQ_FW_REV, MID.SET_OUTPUT_CONFIGURATION,
+            MID.GOTO_MEASUREMENT]
+        assert emu.state == "measurement"
+        assert sorted(emu.outputs) == sorted(drv.requested_outputs())
+        assert dict(emu.outputs)[XDI.EULER_ANGLES] == 100
+        assert dict(emu.outputs)[XDI.PACKET_COUNTER] == MAX_FREQUENCY
+        assert drv.health.extra["device_id"] == "06301234"
+        assert drv.health.extra["firmware"] == "1.8.2 build 37 rev 70964"
+    finally:
+        drv.close()
+        drv.close()  # safe twice
+
+
+@pytest.mark.parametrize("precision,tol", [("float32", 2e-5), ("fp1220", 1e-6),
+                                           ("fp1632", 1e-9), ("float64", 1e-12)])
+def test_streaming_values_match_the_source(emu: MtiEmulator, precision: str, tol: float) -> None:
+    drv = make_driver(emu.port, precision=precision)
+    drv.open()
+    readings = collect(drv, 0.35)
+    drv.close()
+    assert len(readings) >= 25
+    counters = [int(r.values["packet_counter"]) for r in readings]
+    assert all((b - a) & 0xFFFF == 1 for a, b in zip(counters, counters[1:], strict=False))
+    steps = np.diff([r.t_device for r in readings])
+    assert np.allclose(steps, 0.01)
+    assert drv.health.extra["dropped_packets"] == 0 and drv.health.rejected_bytes == 0
+    for r in readings:
+        assert not r.invalid
+        want = source(r.t_device)
+        got = (r.values["roll_deg"], r.values["pitch_deg"], r.values["yaw_deg"])
+        assert max(ang_err(a, b) for a, b in zip(got, want, strict=True)) <= tol * 10
+        g = gravity_in_sensor(want[0], want[1])
+        assert max(abs(r.values[k] - v) for k, v in zip(("acc_x", "acc_y", "acc_z"), g,
+                                                         strict=True)) <= tol
+        assert abs(r.values["gyr_z"] - math.radians(40.0) * math.cos(math.radians(want[1]))
+                   * math.cos(math.radians(want[0]))) < 0.02
+        assert r.values["status_word"] == 3.0
+
+
+def test_quaternion_fp1632_ned_is_converted_to_euler(emu: MtiEmulator) -> None:
+    drv = make_driver(emu.port, orientation="quaternion", precision="fp1632",
+                      coordinate_frame="NED")
+    drv.open()
+    readings = collect(drv, 0.25)
+    drv.close()
+    assert XDI.QUATERNION | NED | FP1632 in dict(emu.outputs)
+    assert len(readings) >= 15
+    for r in readings:
+        want = source(r.t_device)
+        for k, w in zip(("roll_deg", "pitch_deg", "yaw_deg"), want, strict=True):
+            assert ang_err(r.values[k], w) < 1e-6
+
+
+def test_faster_than_real_time_clock() -> None:
+    t0 = time.monotonic()
+    with MtiEmulator(source, send_wakeup=False, clock=lambda: 5.0 * (time.monotonic() - t0)
+                     ) as e:
+        drv = make_driver(e.port)
+        drv.open()
+        readings = collect(drv, 0.3)
+        drv.close()
+    assert len(readings) >= 100  # 5x 100 Hz in 0.3 s of real time
+    assert np.allclose(np.diff([r.t_device for r in readings]), 0.01)
+    for r in readings[::10]:
+        assert ang_err(r.values["yaw_deg"], source(r.t_device)[2]) < 1e-4
+
+
+def test_signals_table_source_through_the_installation() -> None:
+    t = np.arange(0.0, 20.0, 0.1)
+    table = SignalsTable.from_arrays(time_s=t, handle_deg=10.0 + 30.0 * np.sin(0.3 * t),
+                                     swing_deg=150.0 * np.sin(0.2 * t))
+    inst = Installation(handle_pitch_offset_deg=4.0, handle_pitch_sign=-1.0,
+                        swing_yaw_zero_deg=120.0)
+    with MtiEmulator(angles_from_signals(table, inst), send_wakeup=False) as e:
+        drv = make_driver(e.port)
+        drv.open()
+        readings = collect(drv, 0.3)
+        drv.close()
+    assert len(readings) >= 20
+    for r in readings:
+        ts = r.t_device
+        assert r.values["roll_deg"] == 0.0
+        assert inst.handle_deg(r.values["pitch_deg"]) == pytest.approx(
+            np.interp(ts, t, table["handle_deg"]), abs=1e-4)
+        assert inst.swing_deg(r.values["yaw_deg"]) == pytest.approx(
+            np.interp(ts, t, table["swing_deg"]), abs=1e-3)
+
+
+def test_noise_and_corruption_are_counted_and_survived() -> None:
+    with MtiEmulator(source, send_wakeup=False, seed=3) as e:
+        drv = make_driver(e.port)
+        drv.open()
+        e.garbage_probability, e.corrupt_probability = 0.3, 0.1
+        readings = collect(drv, 0.8)
+        drv.close()
+    h = drv.health
+    assert len(readings) >= 50
+    assert h.rejected_bytes > 0 and h.bad_frames > 0
+    assert h.extra["dropped_packets"] > 0  # corrupted packets are lost, and counted
+    for r in readings:
+        if not r.invalid:
+            assert ang_err(r.values["yaw_deg"], source(r.t_device)[2]) < 1e-4
+
+
+def test_dropped_packets_and_device_errors(emu: MtiEmulator) -> None:
+    drv = make_driver(emu.port)
+    drv.open()
+    collect(drv, 0.1)
+    emu.drop_packets(5)
+    emu.send_error(0x29)
+    readings = collect(drv, 0.2)
+    drv.close()
+    assert drv.health.extra["dropped_packets"] == 5
+    assert drv.health.extra["device_errors"] == 1
+    assert "data overflow" in (drv.health.last_error or "")
+    assert readings
+
+
+def test_error_answer_during_configuration(emu: MtiEmulator) -> None:
+    emu.fail_commands[MID.SET_OUTPUT_CONFIGURATION] = 0x21
+    drv = make_driver(emu.port)
+    with pytest.raises(DeviceError, match=r"answered SetOutputConfiguration with error 0x21 "
+                                          r"\(invalid parameter\)"):
+        drv.open()
+    drv.close()
+
+
+def test_refused_output_is_reported(emu: MtiEmulator) -> None:
+    drv = make_driver(emu.port)
+    drv.requested_outputs = lambda: [(XDI.PACKET_COUNTER, MAX_FREQUENCY),  # type: ignore
+                                     (XDI.SAMPLE_TIME_FINE, MAX_FREQUENCY),
+                                     (XDI.EULER_ANGLES, 100), (XDI.BARO_PRESSURE, 50)]
+    with pytest.raises(DeviceError, match="refused output BaroPressure"):
+        drv.open()
+    drv.close()
+
+
+def test_device_restart_is_acknowledged_and_reconfigured(emu: MtiEmulator) -> None:
+    emu.send_wakeup = True
+    drv = make_driver(emu.port)
+    drv.open()
+    collect(drv, 0.1)
+    emu.come_back()  # power cycle: the device sends WakeUp
+    with pytest.raises(DeviceError, match="restarted"):
+        collect(drv, 0.3)
+    wait_for(lambda: emu.state == "config", 1.0)  # our WakeUpAck arrived within 500 ms
+    drv.open()
+    assert collect(drv, 0.1)
+    drv.close()
+
+
+def run_in_thread(drv: MtiSerialDriver, sink: Callable[[Reading], None]
+                  ) -> tuple[threading.Thread, threading.Event]:
+    stop = threading.Event()
+    th = threading.Thread(target=drv.run, args=(sink, stop), daemon=True)
+    th.start()
+    return th, stop
+
+
+def test_unplug_and_plug_back_reconnects_with_backoff(emu: MtiEmulator) -> None:
+    drv = make_driver(emu.port)
+    readings: list[Reading] = []
+    th, stop = run_in_thread(drv, readings.append)
+    try:
+        wait_for(lambda: len(readings) > 10 and drv.health.connected)
+        emu.unplug()
+        wait_for(lambda: not drv.health.connected, 2.0)
+        n = len(readings)
+        time.sleep(0.4)  # several failed reopen attempts (the path is gone)
+        assert len(readings) == n and not drv.health.connected
+        assert "MTi" in (drv.health.last_error or "")
+        emu.plug()
+        wait_for(lambda: drv.health.connected and drv.health.reconnects >= 1, 5.0)
+        wait_for(lambda: len(readings) > n + 10, 2.0)
+    finally:
+        stop.set()
+        th.join(3.0)
+    assert not th.is_alive() and not drv.health.connected
+    late = readings[-1]
+    assert ang_err(late.values["yaw_deg"], source(late.t_device)[2]) < 1e-4
+
+
+def test_silent_device_times_out_and_comes_back(emu: MtiEmulator) -> None:
+    drv = make_driver(emu.port)
+    readings: list[Reading] = []
+    errors: list[str] = []
+    th, stop = run_in_thread(drv, readings.append)
+    try:
+        wait_for(lambda: len(readings) > 10)
+        emu.go_silent()
+        wait_for(lambda: not drv.health.connected, 2.0)
+        assert drv.health.timeouts >= 1
+        wait_for(lambda: "no answer from MTi" in (drv.health.last_error or ""), 3.0)
+        errors.append(drv.health.last_error or "")
+        emu.come_back()
+        wait_for(lambda: drv.health.connected and drv.health.reconnects >= 1, 5.0)
+        n = len(readings)
+        wait_for(lambda: len(readings) > n + 5, 2.0)
+    finally:
+        stop.set()
+        th.join(3.0)
+    assert f"no answer from MTi on {emu.port} at 115200 baud" in errors[0]
+
+
+@pytest.mark.parametrize("device_state", ["measurement", "config"])
+def test_wrong_baud_rate_gives_a_clear_error(device_state: str) -> None:
+    with MtiEmulator(source, send_wakeup=False, baudrate=921600) as e:
+        if device_state == "config":
+            e.go_silent()  # a device sitting in Config state sends nothing unprompted
+        drv = make_driver(e.port, baudrate=115200)
+        with pytest.raises(DeviceError) as exc:
+            drv.open()
+        drv.close()
+        assert e.received == []  # it could not understand a single command
+    msg = str(exc.value)
+    assert msg.startswith(f"no answer from MTi on {e.port} at 115200 baud: wrong baud rate "
+                          "or device off?")
+    if device_state == "measurement":
+        assert "bytes of noise received" in msg
+
+
+def test_unopenable_port() -> None:
+    drv = make_driver("/nonexistent/ttyMTI")
+    with pytest.raises(DeviceError, match="cannot open MTi port /nonexistent/ttyMTI"):
+        drv.open()
+
+
+@pytest.mark.parametrize("cfg,key", [
+    ({}, "port"),
+    ({"port": "/dev/x", "baudrate": 12345}, "baudrate"),
+    ({"port": "/dev/x", "baudrate": "fast"}, "baudrate"),
+    ({"port": "/dev/x", "rate_hz": 0}, "rate_hz"),
+    ({"port": "/dev/x", "orientation": "matrix"}, "orientation"),
+    ({"port": "/dev/x", "precision": "float16"}, "precision"),
+    ({"port": "/dev/x", "coordinate_frame": "XYZ"}, "coordinate_frame"),
+    ({"port": "/dev/x", "data_timeout_s": -1}, "data_timeout_s"),
+    ({"port": "/dev/x", "backoff_s": [1.0]}, "backoff_s"),
+    ({"port": "/dev/x", "bauds": 9600}, "bauds"),
+])
+def test_from_config_names_the_bad_key(cfg: dict[str, object], key: str) -> None:
+    with pytest.raises(ValueError, match=f"'{key}'"):
+        MtiSerialDriver.from_config(cfg)
+
+
+def test_from_config_accepts_a_full_config() -> None:
+    drv = MtiSerialDriver.from_config({
+        "name": "arm", "port": "/dev/ttyUSB3", "baudrate": 921600, "rate_hz": 50,
+        "orientation": "quaternion", "precision": "fp1220", "coordinate_frame": "NWU",
+        "stopbits": 2, "command_timeout_s": 2, "data_timeout_s": 0.5, "read_timeout_s": 0.02,
+        "backoff_s": [0.5, 10]})
+    assert drv.name == "arm" and drv.backoff_s == (0.5, 10.0)
+    assert (XDI.QUATERNION | 0x8 | 0x1, 50) in drv.requested_outputs()
