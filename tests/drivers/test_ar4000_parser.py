@@ -1,0 +1,73 @@
+"""Property tests: garbage into the AR4000 line parser never crashes and never yields
+a distance from a malformed line."""
+
+from __future__ import annotations
+
+import re
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from drivers.acuity.ar4000 import Ar4000Config, Ar4000Driver, LineSplitter, parse_line
+
+WELL_FORMED = re.compile(rb"^ *-?\d{1,7}(\.\d{1,4})? *$")
+
+
+@given(st.binary(max_size=64))
+def test_parse_line_never_crashes_and_only_accepts_well_formed(line: bytes) -> None:
+    v = parse_line(line, 0.001)
+    if WELL_FORMED.match(line) is None:
+        assert v is None
+    else:
+        assert v is not None
+
+
+@given(st.integers(0, 99999), st.integers(0, 99))
+def test_well_formed_inch_lines_round_trip(whole: int, frac: int) -> None:
+    line = f"{whole}.{frac:02d}".encode()
+    v = parse_line(line, 0.0254)
+    assert v is not None
+    assert abs(v - (whole + frac / 100) * 0.0254) < 1e-9
+
+
+@given(st.binary(max_size=40).filter(lambda b: any(c not in b" -.0123456789" for c in b)))
+def test_any_foreign_byte_makes_a_line_malformed(line: bytes) -> None:
+    assert parse_line(line, 0.001) is None
+
+
+@given(st.lists(st.binary(max_size=50), max_size=30))
+def test_splitter_never_keeps_more_than_max_line(chunks: list[bytes]) -> None:
+    s = LineSplitter(max_line=32)
+    for c in chunks:
+        for line in s.feed(c):
+            assert b"\n" not in line
+        assert len(s._buf) <= 32
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.binary(max_size=80), max_size=20))
+def test_driver_parse_of_garbage_emits_only_good_distances(chunks: list[bytes]) -> None:
+    drv = Ar4000Driver("laser", Ar4000Config(port="/dev/null"))
+    out = []
+    for c in chunks:
+        drv._parse(c, out.append)
+    for r in out:
+        if r.invalid:
+            assert r.values == {}
+        else:
+            (d,) = r.values.values()
+            assert 0.0 < d <= drv.config.max_plausible_m
+    # every byte of a malformed line is accounted for
+    assert drv.health.rejected_bytes >= drv.health.bad_frames
+
+
+@given(st.lists(st.sampled_from([b"12.34\r\n", b"0\r\n", b"#\x00junk\r\n", b"\xff\xfe",
+                                 b"5", b".", b"\r\n", b"1234567\r\n"]), max_size=40))
+def test_stream_splitting_is_independent_of_chunking(parts: list[bytes]) -> None:
+    stream = b"".join(parts)
+    whole = LineSplitter(1024).feed(stream)
+    s = LineSplitter(1024)
+    pieces: list[bytes] = []
+    for i in range(0, len(stream), 3):
+        pieces += s.feed(stream[i:i + 3])
+    assert pieces == whole

@@ -1,0 +1,216 @@
+"""Modbus ADC: channel map, and the driver against a real pymodbus server (TCP and RTU)."""
+
+from __future__ import annotations
+
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from drivers.capture.format import RegisterRead
+from drivers.modbus_adc import Channel, ChannelMap, ModbusAdcConfig, ModbusAdcDriver
+from hil_fixtures.modbus_adc import ModbusAdcEmulator, source_from_table
+from hil_fixtures.virtual_shovel import MOTOR_CHANNELS, DriverRunner
+from shoveld.signals import SignalsTable
+
+CHANNELS = ChannelMap.from_config([
+    {"name": "hoist1_a", "register": 0, "scale": 400.0},
+    {"name": "crowd_a", "register": 1, "scale": 400.0, "offset": 5.0},
+    {"name": "boom_deg", "register": 3, "raw_min": 0, "raw_max": 65535, "scale": 4.5,
+     "offset": 45.0},
+])
+VALUES = {"hoist1_a": 2345.6, "crowd_a": -1234.5, "boom_deg": 41.25}
+
+
+# --------------------------------------------------------------------------- channel map
+
+
+def test_hall_transducer_scaling() -> None:
+    ch = Channel("hoist1_a", 0, scale=400.0)  # 4000 A over +-10 V
+    assert ch.from_raw(32767) == pytest.approx(4000.0)
+    assert ch.from_raw(-32768) == pytest.approx(-4000.0, abs=0.07)
+    assert ch.to_raw(0.0) in (-1, 0)
+    assert ch.word_to_raw(0xFFFF) == -1 and ch.raw_to_word(-1) == 0xFFFF
+    assert ch.resolution == pytest.approx(8000 / 65535)
+
+
+@given(st.sampled_from(list(CHANNELS) + list(MOTOR_CHANNELS)),
+       st.floats(-1.0, 1.0))
+def test_to_raw_from_raw_round_trip_within_one_count(ch: Channel, frac: float) -> None:
+    lo, hi = ch.from_raw(ch.raw_min), ch.from_raw(ch.raw_max)
+    value = lo + (hi - lo) * (frac + 1) / 2
+    back = ch.from_word(ch.to_word(value))
+    assert back == pytest.approx(value, abs=ch.resolution)
+
+
+def test_out_of_range_saturates() -> None:
+    ch = CHANNELS["hoist1_a"]
+    assert ch.to_raw(1e6) == 32767 and ch.saturated(ch.to_raw(1e6))
+    assert ch.to_raw(-1e6) == -32768
+
+
+def test_blocks_merge_neighbours_and_split_far_registers() -> None:
+    assert [(a, n) for a, n, _ in CHANNELS.blocks()] == [(0, 4)]
+    far = ChannelMap.from_config([{"name": "hoist1_a", "register": 0},
+                                  {"name": "roll_deg", "register": 100}])
+    assert [(a, n) for a, n, _ in far.blocks()] == [(0, 1), (100, 1)]
+    assert [(a, n) for a, n, _ in far.blocks(max_gap=99)] == [(0, 101)]
+
+
+def test_encode_decode_are_inverse() -> None:
+    words = CHANNELS.encode(VALUES, 0, 4)
+    assert words[2] == 0  # unused register keeps the fill
+    got = CHANNELS.decode(0, words)
+    for k, v in VALUES.items():
+        assert got[k] == pytest.approx(v, abs=CHANNELS[k].resolution)
+
+
+@pytest.mark.parametrize("items, text", [
+    ([], "non-empty list"),
+    ({"name": "hoist1_a"}, "non-empty list"),
+    ([{"name": "hoist3_a", "register": 0}], "channels[0].name"),
+    ([{"name": "hoist1_a"}], "register is required"),
+    ([{"name": "hoist1_a", "register": 0, "gain": 2}], "unknown key 'gain'"),
+    ([{"name": "hoist1_a", "register": 0, "scale": "400"}], "scale must be a finite number"),
+    ([{"name": "hoist1_a", "register": 0, "scale": 0}], "scale must not be zero"),
+    ([{"name": "hoist1_a", "register": 0, "raw_min": -5, "raw_max": 65535}], "raw_min/raw_max"),
+    ([{"name": "hoist1_a", "register": 0, "volts_min": 10, "volts_max": -10}], "volts_min"),
+    ([{"name": "hoist1_a", "register": 0}, {"name": "hoist1_a", "register": 1}], "used twice"),
+    ([{"name": "hoist1_a", "register": 0}, {"name": "hoist2_a", "register": 0}], "used twice"),
+])
+def test_channel_map_errors_name_the_entry(items: object, text: str) -> None:
+    with pytest.raises(ValueError) as e:
+        ChannelMap.from_config(items)  # type: ignore[arg-type]
+    assert text in str(e.value)
+
+
+@pytest.mark.parametrize("cfg, key", [
+    ({"kind": "modbus_tcp", "channels": CHANNELS.to_config()}, "host"),
+    ({"kind": "modbus_tcp", "host": "h", "port": 0, "channels": CHANNELS.to_config()}, "port"),
+    ({"kind": "modbus_tcp", "host": "h"}, "channels"),
+    ({"kind": "modbus_tcp", "host": "h", "baudrate": 9600,
+      "channels": CHANNELS.to_config()}, "baudrate"),
+    ({"kind": "modbus_rtu", "channels": CHANNELS.to_config()}, "port"),
+    ({"kind": "modbus_rtu", "port": "/dev/x", "parity": "X",
+      "channels": CHANNELS.to_config()}, "parity"),
+    ({"kind": "modbus_tcp", "host": "h", "poll_hz": 0, "channels": CHANNELS.to_config()},
+     "poll_hz"),
+    ({"kind": "modbus_tcp", "host": "h", "function": "coil",
+      "channels": CHANNELS.to_config()}, "function"),
+    ({"kind": "modbus_tcp", "host": "h", "unit": "1", "channels": CHANNELS.to_config()},
+     "unit"),
+    ({"kind": "modbus", "host": "h", "channels": CHANNELS.to_config()}, "kind"),
+])
+def test_driver_config_errors_name_the_key(cfg: dict[str, object], key: str) -> None:
+    with pytest.raises(ValueError, match=f"'{key}'"):
+        ModbusAdcConfig.from_config(cfg)
+
+
+def test_config_round_trips() -> None:
+    cfg = ModbusAdcConfig.from_config({"kind": "modbus_rtu", "port": "/dev/ttyUSB0",
+                                       "baudrate": 38400, "parity": "E",
+                                       "channels": CHANNELS.to_config()})
+    assert ModbusAdcConfig.from_config(cfg.to_config()) == cfg
+
+
+# --------------------------------------------------------------------------- driver
+
+
+def fast(emu: ModbusAdcEmulator, **kw: object) -> ModbusAdcDriver:
+    cfg = emu.driver_config(poll_hz=100, timeout_s=0.05, stale_after_s=0.2, **kw)
+    return ModbusAdcDriver.from_config("adc", cfg, backoff_s=(0.05, 0.2))
+
+
+@pytest.mark.parametrize("transport", ["tcp", "rtu"])
+def test_values_through_the_channel_map(transport: str) -> None:
+    with ModbusAdcEmulator(lambda t: VALUES, CHANNELS, transport=transport) as emu, \
+            DriverRunner(fast(emu)) as run:
+        assert run.wait_for(lambda: len(run.readings) >= 10, 5)
+        r = run.readings[-1]
+        assert not r.invalid
+        for k, v in VALUES.items():
+            assert r.values[k] == pytest.approx(v, abs=CHANNELS[k].resolution)
+        chans = run.driver.health.extra["channels"]
+        assert all(c["state"] == "ok" and not c["stale"] for c in chans.values())
+
+
+@pytest.mark.parametrize("transport", ["tcp", "rtu"])
+def test_module_that_stops_answering(transport: str) -> None:
+    with ModbusAdcEmulator(lambda t: VALUES, CHANNELS, transport=transport) as emu, \
+            DriverRunner(fast(emu, reconnect_after=1000)) as run:
+        h = run.driver.health
+        assert run.wait_for(lambda: len(run.readings) >= 5, 5)
+        emu.silent = True
+        assert run.wait_for(lambda: h.timeouts >= 5, 5)
+        chans = h.extra["channels"]
+        assert run.wait_for(lambda: all(c["stale"] for c in chans.values()), 2)
+        for name in CHANNELS.names:
+            assert chans[name]["state"] == "timeout" and chans[name]["timeouts"] >= 5
+            assert "no answer" in chans[name]["last_error"]
+        dead = run.readings[-3:]
+        # the old values are not repeated and nothing became zero
+        assert all(r.values == {} and r.invalid == set(CHANNELS.names) for r in dead)
+        n = len(run.readings)
+        emu.silent = False
+        assert run.wait_for(lambda: len(run.readings) > n + 3 and not run.readings[-1].invalid,
+                            5)
+        assert all(c["state"] == "ok" and not c["stale"] for c in chans.values())
+
+
+def test_exception_responses_reported_per_channel() -> None:
+    with ModbusAdcEmulator(lambda t: VALUES, CHANNELS) as emu, DriverRunner(fast(emu)) as run:
+        assert run.wait_for(lambda: len(run.readings) >= 3, 5)
+        emu.exception_code = 4
+        h = run.driver.health
+        assert run.wait_for(lambda: h.extra["exceptions"] >= 3, 5)
+        c = h.extra["channels"]["hoist1_a"]
+        assert c["state"] == "exception" and c["last_error"] == "Modbus exception code 4"
+        assert run.readings[-1].values == {}
+        assert h.reconnects == 0  # the module answered: no reason to reconnect
+
+
+def test_dead_module_leads_to_reconnect_and_recovery() -> None:
+    with ModbusAdcEmulator(lambda t: VALUES, CHANNELS) as emu, \
+            DriverRunner(fast(emu, reconnect_after=3)) as run:
+        h = run.driver.health
+        assert run.wait_for(lambda: len(run.readings) >= 3, 5)
+        emu.silent = True
+        assert run.wait_for(lambda: "answered none of the last 3 polls" in (h.last_error or ""),
+                            5)
+        emu.silent = False
+        assert run.wait_for(lambda: h.reconnects >= 1 and h.connected
+                            and not run.readings[-1].invalid, 5)
+
+
+def test_connection_refused_is_a_clear_error() -> None:
+    from drivers.base import DeviceError
+
+    cfg = {"kind": "modbus_tcp", "host": "127.0.0.1", "port": 1, "timeout_s": 0.2,
+           "channels": CHANNELS.to_config()}
+    drv = ModbusAdcDriver.from_config("adc", cfg)
+    with pytest.raises(DeviceError, match="cannot connect to Modbus module at 127.0.0.1:1"):
+        drv.open()
+
+
+def test_register_log_sees_every_read() -> None:
+    log: list[RegisterRead] = []
+    with ModbusAdcEmulator(lambda t: VALUES, CHANNELS) as emu:
+        drv = fast(emu)
+        drv.register_log = log.append
+        with DriverRunner(drv) as run:
+            assert run.wait_for(lambda: len(log) >= 3, 5)
+            emu.silent = True
+            assert run.wait_for(lambda: any(r.error == "timeout" for r in log), 5)
+    ok = [r for r in log if r.registers is not None]
+    assert ok[0].function == 4 and ok[0].address == 0 and ok[0].count == 4
+    assert CHANNELS.decode(0, ok[0].registers)["hoist1_a"] == pytest.approx(2345.6, abs=0.2)
+
+
+def test_holding_registers_and_table_source() -> None:
+    table = SignalsTable.from_arrays(time_s=[0.0, 100.0], hoist1_a=[1000.0, 2000.0],
+                                     crowd_a=[0.0, 0.0], boom_deg=[45.0, 45.0])
+    src = source_from_table(table, CHANNELS)
+    assert src(50.0)["hoist1_a"] == pytest.approx(1500.0)
+    with ModbusAdcEmulator(src, CHANNELS) as emu, \
+            DriverRunner(fast(emu, function="holding")) as run:
+        assert run.wait_for(lambda: len(run.readings) >= 3, 5)
+        assert 1000.0 <= run.readings[-1].values["hoist1_a"] <= 1100.0
