@@ -26,7 +26,7 @@ class JointFilterConfig:
     max_coast_s: float = 0.5
 
 
-HANDLE = JointFilterConfig(meas_std=math.radians(0.03), jerk_std=2.0)
+HANDLE = JointFilterConfig(meas_std=math.radians(0.03), jerk_std=1.0)
 CROWD = JointFilterConfig(meas_std=0.002, jerk_std=4.0)
 SWING = JointFilterConfig(meas_std=math.radians(0.1), jerk_std=2.0)
 

@@ -1,0 +1,110 @@
+"""Phases and payload of the live engine on simulated cycles, and the CLI round trip."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from shoveld.cli import main
+from shoveld.engine.offline import estimate_table
+from shoveld.model.params import ModelParams
+from shoveld.payload.trucks import Truck, rule_101020
+from shoveld.sim.scenario import RATED_PAYLOAD_KG, SimResult, simulate_cycles
+
+
+def match(est_start: float, res: SimResult) -> float:
+    for p in res.passes:
+        if abs(p.phases["dig"][0] - est_start) < 2.0:
+            return p.payload_kg
+    raise AssertionError(f"no simulated pass starts near {est_start}")
+
+
+def test_every_pass_found_and_accurate(params: ModelParams, cycles: SimResult) -> None:
+    est = estimate_table(cycles.table, params)
+    assert len(est.passes) == len(cycles.passes)
+    err = np.array([p.payload_kg - match(p.start_s, cycles) for p in est.passes])
+    assert all(p.valid for p in est.passes)
+    assert np.max(np.abs(err)) < 0.015 * RATED_PAYLOAD_KG
+    # The reported confidence is not absurd: errors within 4 sigma.
+    stds = np.array([p.std_kg for p in est.passes])
+    assert np.all(np.abs(err) < 4 * stds + 50)
+
+
+def test_phases_follow_the_truth(params: ModelParams, cycles: SimResult) -> None:
+    est = estimate_table(cycles.table, params)
+    for p, tp in zip(est.passes, cycles.passes, strict=True):
+        assert abs(p.start_s - tp.phases["dig"][0]) < 1.5
+        # Final at the dump: after the swing ends, before the return begins.
+        assert tp.phases["swing"][1] - 0.2 < p.end_s < tp.phases["return"][0] + 0.5
+
+
+def test_empty_dipper(params: ModelParams) -> None:
+    res = simulate_cycles(3, seed=104, payloads=[0.0, 0.0, 0.0])
+    est = estimate_table(res.table, params)
+    assert len(est.passes) == 3
+    assert all(abs(p.payload_kg) < 400 for p in est.passes), [p.payload_kg for p in est.passes]
+
+
+def test_missing_current_makes_no_number(params: ModelParams) -> None:
+    res = simulate_cycles(2, seed=105, payload_range=(20000, 30000))
+    res.table.columns["hoist2_a"][:] = np.nan
+    est = estimate_table(res.table, params)
+    assert est.passes and not any(p.valid for p in est.passes)
+    assert all(p.as_dict()["payload_kg"] is None for p in est.passes)
+
+
+def test_trucks_and_rule() -> None:
+    def truck(i: int, total: float) -> Truck:
+        return Truck(i, 100.0, [{"payload_kg": total, "std_kg": 1.0}])
+
+    assert truck(1, 105).status == "ok" and truck(1, 115).status == "over_110"
+    assert truck(1, 125).status == "over_120" and truck(1, 80).status == "under"
+    ok = [truck(i, 95) for i in range(9)] + [truck(9, 115)]
+    assert rule_101020(ok)["compliant"]
+    assert not rule_101020(ok[:8] + [truck(8, 115), truck(9, 115)])["compliant"]
+    assert not rule_101020([truck(1, 90), truck(2, 121)])["compliant"]
+
+
+def test_cli_round_trip(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """sim -> calibrate -> estimate through the command line, JSON out."""
+    e, l, c, p = (str(tmp_path / n) for n in ("e.csv", "l.csv", "c.csv", "p.toml"))
+    assert main(["sim", "--scenario", "calibration", "--load", "0", "--seed", "5", "--out", e]) == 0
+    assert main(["sim", "--scenario", "calibration", "--load", "8420", "--seed", "6",
+                 "--out", l]) == 0
+    assert main(["sim", "--passes", "5", "--seed", "7", "--out", c]) == 0
+    assert main(["calibrate", "--out", p, e, l]) == 0
+    capsys.readouterr()
+    assert main(["estimate", "--params", p, "--json", c]) == 0
+    out = capsys.readouterr()
+    lines = [json.loads(x) for x in out.out.splitlines()]
+    truth = json.loads(Path(c + ".truth.json").read_text())["passes"]
+    assert len(lines) == len(truth) == 5
+    for got, tp in zip(lines, truth, strict=True):
+        assert {"pass", "start_s", "end_s", "payload_kg", "std_kg"} <= set(got)
+        assert abs(got["payload_kg"] - tp["payload_kg"]) < 500
+    summary = json.loads(out.err.strip().splitlines()[-1])
+    assert summary["trucks"] and summary["rule_10_10_20"]["trucks"] >= 1
+
+
+def test_cli_bad_input_is_one_clear_line(tmp_path: Path,
+                                         capsys: pytest.CaptureFixture[str]) -> None:
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time_s,handle_deg\n0,1\n")
+    assert main(["calibrate", "--out", str(tmp_path / "p.toml"), str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "bad.csv:1" in err and "missing column" in err
+
+
+def test_every_subcommand_has_help(capsys: pytest.CaptureFixture[str]) -> None:
+    from shoveld.cli import build_parser
+
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command")
+    assert {"sim", "calibrate", "estimate"} <= set(sub.choices)
+    for name in sub.choices:
+        with pytest.raises(SystemExit) as ei:
+            main([name, "--help"])
+        assert ei.value.code == 0

@@ -1,0 +1,90 @@
+"""The signals-table reader: round trip, and an error naming file, line and column."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from shoveld.signals import COLUMN_NAMES, SignalsFormatError, SignalsTable, read_table, write_table
+
+HEADER = ",".join(COLUMN_NAMES)
+ROW = "{t},10.5,8.2,30,45,400,390,70,50,29,0,30,0.1,-0.2,"
+
+
+def _write(tmp_path: Path, body: str, name: str = "t.csv") -> Path:
+    p = tmp_path / name
+    p.write_text(body, encoding="utf-8")
+    return p
+
+
+def test_round_trip(tmp_path: Path) -> None:
+    t = np.arange(5) * 0.02
+    table = SignalsTable.from_arrays(meta={"known_payload_kg": "8420"}, time_s=t,
+                                     handle_deg=np.linspace(-40, 20, 5), crowd_m=np.full(5, 8.0),
+                                     hoist1_a=np.array([1.5, np.nan, 3, 4, 5]))
+    p = tmp_path / "x.csv"
+    write_table(p, table)
+    back = read_table(p)
+    assert back.meta["format"] == "shovel-signals/1"
+    assert back.known_payload_kg == 8420.0
+    np.testing.assert_allclose(back.time, t)
+    np.testing.assert_allclose(back["handle_deg"], table["handle_deg"])
+    assert np.isnan(back["hoist1_a"][1]) and np.isnan(back["boom_deg"]).all()
+    assert np.all(back.payload_truth() == 8420.0)
+
+
+def test_valid_minimal(tmp_path: Path) -> None:
+    body = "# format: shovel-signals/1\n# sample_rate_hz: 50\n" + HEADER + "\n" + "\n".join(
+        ROW.format(t=k * 0.02) for k in range(3)) + "\n"
+    table = read_table(_write(tmp_path, body))
+    assert len(table) == 3 and table.sample_rate_hz == 50.0
+
+
+@pytest.mark.parametrize(("body", "line", "column", "words"), [
+    (HEADER + "\n" + ROW.format(t=0) + "\n" + ROW.format(t=0.02).replace(",8.2,", ",400,") + "\n",
+     3, "crowd_m", "outside the plausible range"),
+    (HEADER + "\n" + ROW.format(t=0.04) + "\n" + ROW.format(t=0.02) + "\n",
+     3, "time_s", "strictly increasing"),
+    (HEADER + "\n" + ROW.format(t=0) + "\n" + ROW.format(t=0.02).replace(",400,", ",nan,") + "\n",
+     3, "hoist1_a", "not a finite number"),
+    (HEADER + "\n" + ROW.format(t=0).replace(",45,", ",abc,") + "\n", 2, "boom_deg",
+     "expected a number"),
+    (HEADER.replace(",swing_a", "") + "\n", 1, "swing_a", "missing column"),
+    (HEADER + "\n" + ROW.format(t=0) + ",7\n", 2, None, "expected 15 values"),
+    ("# format: shovel-signals/9\n" + HEADER + "\n", 1, None, "understands"),
+    ("# known_payload_kg: heavy\n" + HEADER + "\n", 1, None, "must be a number"),
+    (HEADER + "\n", 2, None, "no data rows"),
+    (HEADER + "\n" + ",10,8,0,45,1,1,70,1,29,1,30,0,0,\n", 2, "time_s", "blank"),
+])
+def test_errors_name_line_and_column(tmp_path: Path, body: str, line: int, column: str | None,
+                                     words: str) -> None:
+    p = _write(tmp_path, body)
+    with pytest.raises(SignalsFormatError) as ei:
+        read_table(p)
+    e = ei.value
+    assert e.path == str(p)
+    assert e.line == line
+    assert e.column == column
+    assert words in str(e)
+    assert str(p) in str(e)
+
+
+def test_columns_out_of_order(tmp_path: Path) -> None:
+    cols = list(COLUMN_NAMES)
+    cols[1], cols[2] = cols[2], cols[1]
+    with pytest.raises(SignalsFormatError, match="out of order"):
+        read_table(_write(tmp_path, ",".join(cols) + "\n"))
+
+
+def test_not_utf8(tmp_path: Path) -> None:
+    p = tmp_path / "bin.csv"
+    p.write_bytes(b"\xff\xfe" + HEADER.encode())
+    with pytest.raises(SignalsFormatError, match="not UTF-8"):
+        read_table(p)
+
+
+def test_missing_file(tmp_path: Path) -> None:
+    with pytest.raises(SignalsFormatError, match="cannot read"):
+        read_table(tmp_path / "nope.csv")
