@@ -24,9 +24,10 @@ here, taken from public notes citing the MT CAN Protocol Documentation (MT1604P)
 therefore configurable: the int16 scalings, the byte order (big-endian like Xbus,
 ``byteorder``), and the quaternion scale (2^-15 here; one source says 1/32767).
 CAN output is configured over Xbus (SetCanOutputConfig), not over CAN, so this driver
-only listens: it assembles the frames of one output group and emits a
-:class:`Reading` when every configured message of the group has arrived (or, if a
-frame is lost, when the next group starts, with the missing quantities invalid).
+only listens; ``open()`` succeeds once an MTi frame arrives. It assembles the frames of
+one output group and emits a :class:`Reading` when every configured message of the
+group has arrived (or, if a frame is lost, when the next group starts, with the missing
+quantities invalid).
 """
 
 from __future__ import annotations
@@ -196,6 +197,7 @@ class MtiCanDriver(Driver):
         self.recv_timeout_s = float(recv_timeout_s)
         self.bus_factory = bus_factory
         self._bus: can.BusABC | None = None
+        self._first: can.Message | None = None
         self._group: dict[str, tuple[float, ...]] = {}
         self._group_t = 0.0
         self._prev_counter: int | None = None
@@ -253,11 +255,30 @@ class MtiCanDriver(Driver):
                               f"{e}") from e
         self._group = {}
         self._prev_counter = None
+        # Connected means the MTi is talking, not just that the bus opened: wait for it.
+        deadline = time.monotonic() + self.data_timeout_s
+        while True:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                self.close()
+                raise DeviceError(f"no MTi frames on CAN {self.interface}:{self.channel} "
+                                  f"within {self.data_timeout_s:g} s of opening")
+            try:
+                msg = self._bus.recv(timeout=min(left, 0.05))
+            except can.CanError as e:
+                self.close()
+                raise DeviceError(f"CAN {self.channel}: {e}") from e
+            if msg is not None and self.codec.decode(msg.arbitration_id, bytes(msg.data)):
+                self._first = msg
+                break
         self._last_valid = time.monotonic()
 
     def read(self, sink: Sink) -> None:
         if self._bus is None:
             raise DeviceError(f"CAN {self.channel} is not open")
+        if self._first is not None:
+            first, self._first = self._first, None
+            self._on_frame(first, sink)
         deadline = time.monotonic() + self.recv_timeout_s
         while True:
             left = deadline - time.monotonic()
