@@ -179,9 +179,13 @@ class RecordedAnswers:
 
 class _SerialFeeder:
     def __init__(self, entry: DeviceEntry, capture: Capture, clock: ReplayClock,
-                 responder: Responder | None, answer_window_s: float) -> None:
+                 responder: Responder | None, answer_window_s: float, stall_s: float) -> None:
         self.entry = entry
         self.clock = clock
+        self.stall_s = stall_s
+        self._stall = (0, 0.0)
+        self._stalled = False
+        self.dropped = 0
         chunks = list(capture.serial_chunks(entry.name))
         self.stream, pairs = split_answers(chunks, answer_window_s)
         self.responder: Responder = responder or RecordedAnswers(pairs)
@@ -207,9 +211,22 @@ class _SerialFeeder:
         return self._idx >= len(self.stream)
 
     def settled(self, t: float) -> bool:
+        """Released up to ``t`` and read by the driver, or the driver is not reading
+        (nothing consumed for ``stall_s``: not connected, or in reconnect back-off)."""
         if self.released_t < t and not self.exhausted:
             return False
-        return self.link.pending_to_driver() == 0
+        pending = self.link.pending_to_driver()
+        if pending == 0:
+            return True
+        consumed = self.written - pending
+        now = time.monotonic()
+        if consumed != self._stall[0]:  # the driver is reading: wait for it
+            self._stall = (consumed, now)
+            self._stalled = False
+            return False
+        if not self._stalled and now - self._stall[1] > self.stall_s:
+            self._stalled = True  # judged once; later steps do not wait again
+        return self._stalled
 
     def _run(self) -> None:
         link = self.link
@@ -232,13 +249,17 @@ class _SerialFeeder:
                     self.driver_bytes += len(data)
                     answer = self.responder(data)
                     if answer:
-                        link.write(answer, timeout_s=0.5)
+                        self.written += link.write(answer, timeout_s=0.5)
             now = self.clock.now()
             while self._idx < len(self.stream) and self.stream[self._idx][0] <= now:
                 data = self.stream[self._idx][1]
-                if link.write(data, timeout_s=0.5) < len(data):
-                    log.warning("replay %s: driver not reading; dropped bytes", self.entry.name)
-                self.written += len(data)
+                n = link.write(data, timeout_s=0.02)
+                if n < len(data):  # nobody reads the port: drop, as a full UART would
+                    if not self.dropped:
+                        log.warning("replay %s: driver not reading; dropping bytes",
+                                    self.entry.name)
+                    self.dropped += len(data) - n
+                self.written += n
                 self._idx += 1
             self.released_t = now
 
@@ -319,13 +340,19 @@ class RecordedRegisters:
             rs.append(r)
         self.end_t = max((r.t for r in reads), default=0.0)
 
-    def _latest(self, key: tuple[int, int, int], t: float) -> RegisterRead | None:
+    def _latest(self, key: tuple[int, int, int], t: float) -> RegisterRead | None | int:
+        """Latest read of ``key`` at or before ``t``; NOT_YET before the first one;
+        None if that block was never read."""
         entry = self._by_block.get(key)
         if entry is None:
             return None
         ts, rs = entry
         i = bisect.bisect_right(ts, t) - 1
-        return rs[max(i, 0)]
+        return rs[i] if i >= 0 else self.NOT_YET
+
+    NOT_YET = 6
+    """Answer before the first recorded read: DEVICE_BUSY, an honest "no value yet"
+    that still counts as an answer (no reconnect storm at the start of a replay)."""
 
     def __call__(self, fc: int, address: int, count: int) -> list[int] | int | None:
         t = self.clock()
@@ -334,12 +361,14 @@ class RecordedRegisters:
             for (f, a, c) in self._by_block:
                 if f == fc and a <= address and address + count <= a + c:
                     r = self._latest((f, a, c), t)
-                    if r is not None and r.registers is not None:
+                    if isinstance(r, RegisterRead) and r.registers is not None:
                         off = address - a
                         return list(r.registers[off:off + count])
                     break
             else:
                 return 2  # ILLEGAL_ADDRESS: nothing recorded there
+        if isinstance(r, int):
+            return r
         if r is None or r.error == "timeout":
             return None
         if r.error == "exception":
@@ -443,26 +472,38 @@ class ReplaySession:
 
 
 def open_replay(capture_dir: str | os.PathLike[str], speed: float | None = 1.0, *,
+                devices: list[str] | None = None,
                 responders: dict[str, Responder] | None = None, answer_window_s: float = 0.05,
                 settle_timeout_s: float = 0.5, modbus_quiet_s: float = 0.003,
-                start_at: float = 0.0) -> ReplaySession:
+                serial_stall_s: float = 0.02, start_at: float = 0.0) -> ReplaySession:
     """Start replaying ``capture_dir``; connect drivers to ``session.endpoints``.
 
     ``speed``: 1.0 = recorded pace, X = X times faster, None = stepped clock (the
-    consumer advances it). ``responders`` maps a device name or kind to a
-    :data:`Responder` replacing the recorded-answer default.
+    consumer advances it). ``devices``: replay only these (default: all).
+    ``responders`` maps a device name or kind to a :data:`Responder` replacing the
+    recorded-answer default. Stepped mode: ``advance`` waits at most
+    ``settle_timeout_s`` for delivery; a serial port nobody reads stops counting after
+    ``serial_stall_s``; a Modbus server counts as settled when it has answered at the
+    new time or has seen no request for ``modbus_quiet_s``.
     """
     capture = read_capture(Path(capture_dir))
+    if devices is not None:
+        unknown = [d for d in devices if d not in capture.devices]
+        if unknown:
+            raise ValueError(f"{capture_dir}: no device(s) {unknown} in the capture; it has "
+                             f"{sorted(capture.devices)}")
     clock = ReplayClock(start=start_at, speed=speed, settle_timeout_s=settle_timeout_s)
     session = ReplaySession(capture, clock)
     responders = responders or {}
     try:
         for name, dev in capture.devices.items():
+            if devices is not None and name not in devices:
+                continue
             feeder: Any
             if dev.kind in SERIAL_KINDS:
                 feeder = _SerialFeeder(dev, capture, clock,
                                        responders.get(name) or responders.get(dev.kind),
-                                       answer_window_s)
+                                       answer_window_s, serial_stall_s)
             elif dev.kind in CAN_KINDS:
                 feeder = _CanFeeder(dev, capture, clock)
             elif dev.kind in MODBUS_KINDS:

@@ -1,0 +1,249 @@
+"""Record emulated devices through the real drivers, replay through the same drivers."""
+
+from __future__ import annotations
+
+import json
+import time
+import uuid
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from drivers.acuity import Ar4000Driver
+from drivers.base import Driver, Reading
+from drivers.capture import read_capture
+from drivers.capture.recorder import RecordConfigError, Recorder, load_record_config
+from drivers.capture.replay import ReplaySession, open_replay
+from drivers.modbus_adc import ChannelMap, ModbusAdcDriver
+from hil_fixtures.ar4000 import Ar4000Emulator
+from hil_fixtures.modbus_adc import ModbusAdcEmulator
+from hil_fixtures.virtual_shovel import DriverRunner
+from shoveld.installation import Installation
+from shoveld.signals import SignalsTable
+
+CHANNELS = ChannelMap.from_config([
+    {"name": "hoist1_a", "register": 0, "scale": 400.0},
+    {"name": "roll_deg", "register": 1, "scale": 3.0},
+])
+
+
+def laser_cfg(port: str) -> dict[str, Any]:
+    return {"kind": "ar4000", "port": port, "sample_interval_us": 10000,
+            "command_gap_s": 0.005, "answer_timeout_s": 1.0, "silent_timeout_s": 0.3}
+
+
+def replay_through(session: ReplaySession, make: dict[str, Callable[[dict[str, Any]], Driver]],
+                   tick: float = 0.01) -> dict[str, list[Reading]]:
+    """Run one driver per device against the session until everything is replayed."""
+    runners = {n: DriverRunner(f(session.driver_config(n))).start() for n, f in make.items()}
+    try:
+        end = time.monotonic() + 20
+        while not session.finished and time.monotonic() < end:
+            if session.clock.stepped:
+                session.clock.advance(tick)
+            else:
+                time.sleep(0.02)
+        time.sleep(0.05)
+    finally:
+        for r in runners.values():
+            r.stop()
+    return {n: r.readings for n, r in runners.items()}
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, Any]]:
+    """1.5 s of a moving laser and an ADC whose module goes quiet for a while."""
+    out = tmp_path_factory.mktemp("cap") / "c1"
+    with Ar4000Emulator(lambda t: 3.0 + 0.5 * t if not 0.6 < t < 0.7 else None) as laser, \
+            ModbusAdcEmulator(lambda t: {"hoist1_a": 1000.0 * t, "roll_deg": 2.0}, CHANNELS,
+                              transport="rtu") as adc:
+        cfg = {"installation": {"crowd_offset_m": 6.0},
+               "devices": {"laser": laser_cfg(laser.port),
+                           "adc": adc.driver_config(poll_hz=50, timeout_s=0.05)}}
+        rec = Recorder(cfg, out)
+        rec.start()
+        time.sleep(1.0)
+        adc.silent = True
+        time.sleep(0.2)
+        adc.silent = False
+        time.sleep(0.3)
+        summary = rec.stop()
+    return out, summary
+
+
+def test_recording_holds_the_raw_stream(recorded: tuple[Path, dict[str, Any]]) -> None:
+    out, summary = recorded
+    assert summary["laser"]["readings"] > 100 and summary["adc"]["readings"] > 50
+    cap = read_capture(out)
+    assert cap.installation == {**cap.installation, "crowd_offset_m": 6.0}
+    assert cap.devices["adc"].kind == "modbus_rtu"
+    chunks = list(cap.serial_chunks("laser"))
+    tx = b"".join(c.data for c in chunks if c.direction == "tx")
+    assert tx == b"A4\rS10000\r"
+    rx = b"".join(c.data for c in chunks if c.direction == "rx")
+    assert rx.count(b"\r\n") > 100 and b"\r\n0\r\n" in rx  # zero = no target recorded raw
+    reads = list(cap.modbus_reads("adc"))
+    assert sum(r.error == "timeout" for r in reads) >= 2
+    assert 1.3 < cap.duration_s() < 3.0
+
+
+@pytest.mark.parametrize("speed", [2.0, None], ids=["paced-x2", "stepped"])
+def test_replay_through_the_same_drivers(recorded: tuple[Path, dict[str, Any]],
+                                         speed: float | None) -> None:
+    out, _ = recorded
+    cap = read_capture(out)
+    rx = b"".join(c.data for c in cap.serial_chunks("laser") if c.direction == "rx")
+    recorded_reads = [r for r in cap.modbus_reads("adc")]
+    with open_replay(out, speed=speed) as s:
+        assert Path(s.endpoints["laser"].port).exists()  # a real tty the driver opens
+        got = replay_through(s, {
+            "laser": lambda c: Ar4000Driver.from_config("laser", c, clock=s.clock),
+            "adc": lambda c: ModbusAdcDriver.from_config("adc", c, clock=s.clock)})
+        assert s.clock.unsettled_steps == 0
+    laser = got["laser"]
+    dist = [r.values["distance_m"] for r in laser if r.values]
+    # the replayed distances are the recorded ones, in order (the first few may be
+    # lost while the driver connects)
+    want = [int(x) * 0.001 for x in rx.split(b"\r\n") if x.strip() and int(x) != 0]
+    assert len(dist) > 0.8 * len(want)
+    k = want.index(dist[0])
+    assert dist == want[k:k + len(dist)]
+    assert any(r.invalid == {"distance_m"} for r in laser)
+    # readings carry capture time, monotonically
+    ts = [r.t_host for r in laser]
+    assert ts == sorted(ts) and 0 <= ts[0] and ts[-1] <= cap.duration_s() + 0.1
+    adc = got["adc"]
+    assert len(adc) > 40
+    ok = [r for r in adc if r.values]
+    dead = [r for r in adc if not r.values]
+    assert dead and all(r.invalid == {"hoist1_a", "roll_deg"} for r in dead)
+    recorded_hoist = {round(CHANNELS.decode(0, r.registers)["hoist1_a"], 3)
+                      for r in recorded_reads if r.registers}
+    assert {round(r.values["hoist1_a"], 3) for r in ok} <= recorded_hoist
+    # the recorded silence happens at the same capture time in the replay
+    dead_t = [r.t_host for r in dead]
+    assert 0.9 < min(dead_t) < 1.4
+
+
+def test_modbus_tcp_replay_serves_on_a_free_local_port(tmp_path: Path) -> None:
+    out = tmp_path / "c"
+    with ModbusAdcEmulator(lambda t: {"hoist1_a": 500.0, "roll_deg": -1.0}, CHANNELS) as adc:
+        Recorder({"devices": {"adc": adc.driver_config(poll_hz=100)}}, out).run(0.3)
+    with open_replay(out, speed=None) as s:
+        ep = s.endpoints["adc"]
+        assert ep.host == "127.0.0.1" and ep.port and ep.port != adc.port
+        got = replay_through(s, {"adc": lambda c: ModbusAdcDriver.from_config(
+            "adc", c, clock=s.clock)})
+    vals = [r.values for r in got["adc"] if r.values]
+    assert len(vals) > 15
+    assert all(v["hoist1_a"] == pytest.approx(500.0, abs=0.2) for v in vals)
+
+
+def test_mti_serial_handshake_is_answered_from_the_recording(tmp_path: Path) -> None:
+    mti = pytest.importorskip("hil_fixtures.mti")
+    from drivers.xsens.serial_driver import MtiSerialDriver
+
+    out = tmp_path / "c"
+    with mti.MtiEmulator(lambda t: (0.0, 10.0 + t, 20.0)) as emu:
+        cfg = {"devices": {"mti": {"kind": "mti_serial", "port": emu.port,
+                                   "baudrate": 115200, "rate_hz": 100}}}
+        Recorder(cfg, out).run(0.8)
+    for speed in (1.0, None):
+        with open_replay(out, speed=speed) as s:
+            got = replay_through(s, {"mti": lambda c: MtiSerialDriver.from_config(
+                {k: v for k, v in c.items() if k != "kind"}, clock=s.clock)})
+        r = got["mti"]
+        assert len(r) > 60, speed
+        assert r[-1].values["pitch_deg"] == pytest.approx(10.0 + r[-1].t_device, abs=0.02)
+
+
+def test_can_replay_through_python_can_virtual_bus(tmp_path: Path) -> None:
+    mti_can = pytest.importorskip("hil_fixtures.mti_can")
+    from drivers.xsens.can_driver import MtiCanDriver
+
+    out = tmp_path / "c"
+    channel = f"test-{uuid.uuid4().hex[:8]}"
+    with mti_can.MtiCanEmulator(lambda t: (0.0, 5.0, 20.0), channel):
+        cfg = {"devices": {"mti": {"kind": "mti_can", "interface": "virtual",
+                                   "channel": channel}}}
+        Recorder(cfg, out).run(0.5)
+    with open_replay(out, speed=None) as s:
+        assert s.endpoints["mti"].channel != channel
+        got = replay_through(s, {"mti": lambda c: MtiCanDriver.from_config(
+            {k: v for k, v in c.items() if k != "kind"}, clock=s.clock)})
+    assert len(got["mti"]) > 30
+    assert got["mti"][-1].values["pitch_deg"] == pytest.approx(5.0, abs=0.01)
+
+
+def test_shoveld_record_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from shoveld.cli import main
+
+    with Ar4000Emulator(lambda t: 2.0) as laser:
+        cfg = tmp_path / "rec.toml"
+        cfg.write_text(f'[installation]\ncrowd_offset_m = 5.5\n\n[devices.laser]\n'
+                       f'kind = "ar4000"\nport = "{laser.port}"\nsample_interval_us = 10000\n'
+                       'command_gap_s = 0.005\n')
+        assert main(["record", "--config", str(cfg), "--out", str(tmp_path / "o"),
+                     "--duration", "0.4"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["devices"]["laser"]["readings"] > 10
+    cap = read_capture(tmp_path / "o")
+    assert cap.installation["crowd_offset_m"] == 5.5
+    assert main(["record", "--config", str(cfg), "--out", str(tmp_path / "o"),
+                 "--duration", "0.1"]) == 2  # refuses to overwrite
+    assert "not empty" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("text, msg", [
+    ("[devices.x]\nkind = 'laser'\n", "[devices.x] key 'kind' must be one of"),
+    ("devices = 1\n", "needs at least one [devices.<name>]"),
+    ("[devices.x]\nkind = 'ar4000'\n[installation]\ncrowd_gain = 'a'\n", "'crowd_gain'"),
+    ("[devices.x\n", "not valid TOML"),
+])
+def test_record_config_errors(tmp_path: Path, text: str, msg: str) -> None:
+    p = tmp_path / "c.toml"
+    p.write_text(text)
+    with pytest.raises(RecordConfigError) as e:
+        load_record_config(p)
+    assert str(e.value).startswith(str(p)) and msg in str(e.value)
+    with pytest.raises(RecordConfigError, match=r"\[devices.l\]: ar4000: unknown key 'speed'"):
+        Recorder({"devices": {"l": {"kind": "ar4000", "port": "/dev/x", "speed": 1}}},
+                 tmp_path / "o")
+
+
+def test_make_capture_from_a_signals_table(tmp_path: Path) -> None:
+    """Simulated shovel -> emulators -> real drivers -> capture -> replay -> same signals."""
+    from hil_fixtures.make_capture import make_capture
+
+    t = np.arange(0.0, 4.0, 0.02)
+    table = SignalsTable.from_arrays(
+        time_s=t + 100.0, handle_deg=10 + 5 * np.sin(t), crowd_m=8 + np.sin(t),
+        swing_deg=20 * np.sin(t / 2), boom_deg=np.full_like(t, 45.0),
+        hoist1_a=1500 + 500 * np.sin(t), hoist2_a=1500 + 500 * np.sin(t),
+        hoist_field_a=np.full_like(t, 80.0), crowd_a=300 * np.cos(t),
+        crowd_field_a=np.full_like(t, 50.0), swing_a=800 * np.sin(t / 2),
+        swing_field_a=np.full_like(t, 60.0), roll_deg=np.full_like(t, 1.0),
+        pitch_deg=np.full_like(t, -2.0))
+    inst = Installation(crowd_offset_m=6.0)
+    summary = make_capture(table, tmp_path / "c", speed=4.0, mti="serial", installation=inst)
+    assert all(d["readings"] > 50 for d in summary["devices"].values())
+    cap = read_capture(tmp_path / "c")
+    assert cap.manifest["signals_table"]["t0_s"] == 100.0
+    assert set(cap.devices) == {"laser", "mti", "adc_motors", "adc_incl"}
+    with open_replay(tmp_path / "c", speed=None, devices=["laser", "adc_motors"]) as s:
+        assert set(s.endpoints) == {"laser", "adc_motors"}
+        got = replay_through(s, {
+            "laser": lambda c: Ar4000Driver.from_config("laser", c, clock=s.clock),
+            "adc_motors": lambda c: ModbusAdcDriver.from_config("m", c, clock=s.clock)})
+    laser = [r for r in got["laser"] if r.values]
+    crowd = np.array([inst.crowd_m(r.values["distance_m"]) for r in laser])
+    want = np.interp([r.t_host + 100.0 for r in laser], table.time, table["crowd_m"])
+    # a sample is stamped when the host reads it, slightly after it was measured
+    assert np.max(np.abs(crowd - want)) < 0.05
+    motors = [r for r in got["adc_motors"] if r.values]
+    hoist = np.array([r.values["hoist1_a"] for r in motors])
+    want_h = np.interp([r.t_host + 100.0 for r in motors], table.time, table["hoist1_a"])
+    assert np.max(np.abs(hoist - want_h)) < 40.0  # 500 A/s slope x a few ms, plus 1 count
