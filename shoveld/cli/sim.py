@@ -46,9 +46,9 @@ def parse_effect_args(items: list[str]) -> dict[str, float | None]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from shoveld.signals.table import write_table
     from shoveld.sim import effects as fx
     from shoveld.sim.scenario import SensorNoise, simulate_calibration, simulate_cycles
-    from shoveld.signals.table import write_table
 
     if args.list_effects:
         for name, cls in sorted(fx.SIM_EFFECTS.items()):

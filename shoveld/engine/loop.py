@@ -2,7 +2,9 @@
 
 This is the only implementation of the payload pipeline. ``shoveld estimate``
 feeds it rows of a table; the daemon feeds it samples assembled from the
-drivers at each tick. Everything it needs is causal.
+drivers at each tick. Phases follow the causal Kalman joint filters (no delay);
+the payload equations are evaluated half a smoothing window late with zero-phase
+rates (``shoveld.kinematics.fixed_lag``), which removes the filter-lag bias.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import numpy as np
 
 from shoveld.cycle.phases import DIG, DUMP, ESTIMATING, IDLE, PHASES, PhaseConfig, PhaseMachine
 from shoveld.kinematics.causal import CROWD, HANDLE, SWING, JointFilter
+from shoveld.kinematics.fixed_lag import FixedLagSavgol
 from shoveld.model.kin import Kinematics
 from shoveld.model.params import ModelParams
 from shoveld.payload.rls import PayloadRls, RlsConfig
@@ -36,12 +39,14 @@ class EngineConfig:
     """A pause this long without digging means the truck was exchanged."""
     warmup_s: float = 1.0
     """The joint filters' start-up transient: no phase changes before it has passed."""
+    window_s: float = 0.5
+    """Zero-phase window of the payload equations (identification uses the same)."""
     settle_s: float = 0.4
     """Samples this soon after leaving the bank are not used (bank contact fades)."""
     min_samples: int = 40
     """A pass with fewer valid payload updates is reported invalid."""
     hoist_field_nominal_a: float = 70.0
-    weak_field_fraction: float = 0.92
+    weak_field_fraction: float = 0.97
     phases: PhaseConfig = field(default_factory=PhaseConfig)
     rls: RlsConfig = field(default_factory=RlsConfig)
 
@@ -108,6 +113,8 @@ class Engine:
         self.f_th = JointFilter(HANDLE, dt)
         self.f_d = JointFilter(CROWD, dt)
         self.f_sw = JointFilter(SWING, dt)
+        self.lagged: FixedLagSavgol[tuple[Sample, bool, int]] = FixedLagSavgol(
+            self.cfg.window_s, dt, 3)
         self.phases = PhaseMachine(self.cfg.phases)
         self.noise = (params.noise["handle"], params.noise["crowd"])
         self.rls: PayloadRls | None = None
@@ -142,10 +149,20 @@ class Engine:
         if ph != prev:
             events.extend(self._transition(prev, ph, t))
         valid = False
-        if ph in ESTIMATING and self.rls is not None:
-            valid = self._update(s, th, thd, thdd, d, dd, ddd, sw, swd, swdd)
+        settled = ph in ESTIMATING and t - self.dig_end >= self.cfg.settle_s
+        out = self.lagged.push(t, (math.nan if "handle_deg" in bad else math.radians(s.handle_deg),
+                                   math.nan if "crowd_m" in bad else s.crowd_m,
+                                   math.radians(s.swing_deg) if "swing_deg" not in bad
+                                   and not math.isnan(s.swing_deg) else 0.0),
+                               (s, settled, self.pass_index))
+        if out is not None:
+            (s_lag, settled_lag, pass_lag), kin = out
+            if settled_lag and pass_lag == self.pass_index and self.rls is not None:
+                valid = self._update(s_lag, *kin[0], *kin[1], *kin[2])
+        elif ph in ESTIMATING:
+            self.invalid_updates += 1
         if self.rls is not None and self.rls.n:
-            est = LiveEstimate(t, PHASES[ph], self.rls.payload_kg, self.rls.std_kg,
+            est = LiveEstimate(t, PHASES[ph], self.rls.payload_kg, self._std(),
                                valid or ph not in ESTIMATING)
         else:
             est = LiveEstimate(t, PHASES[ph], math.nan, math.nan, False)
@@ -192,16 +209,14 @@ class Engine:
         reason = "" if valid else (
             f"only {rls.n} valid samples in lift and swing ({self.invalid_updates} invalid)")
         pr = PassResult(self.pass_index, self.truck.index, self.pass_start, t, rls.payload_kg,
-                        rls.std_kg, rls.n, valid, reason)
+                        self._std(), rls.n, valid, reason)
         self.truck.passes.append(pr.as_dict())
         self.last_dump_t = t
         self.rls = None
         return [pr, TruckResult(self.truck, closed=False)]
 
-    def _update(self, s: Sample, th: float, thd: float, thdd: float, d: float, dd: float,
-                ddd: float, sw: float, swd: float, swdd: float) -> bool:
-        if s.time_s - self.dig_end < self.cfg.settle_s:
-            return False
+    def _update(self, s: Sample, th: float, d: float, sw: float, thd: float, dd: float,
+                swd: float, thdd: float, ddd: float, swdd: float) -> bool:
         i_h = s.hoist1_a + s.hoist2_a
         if (any(n in s.invalid for n in NEEDED) or math.isnan(i_h) or math.isnan(s.crowd_a)
                 or math.isnan(th) or math.isnan(d)):
@@ -217,10 +232,19 @@ class Engine:
                        swing_rate=_arr(swd), swing_acc=_arr(swdd),
                        roll=_arr(math.radians(np.nan_to_num(s.roll_deg))),
                        pitch=_arr(math.radians(np.nan_to_num(s.pitch_deg))))
-        a, b = self.model.payload_equations(k, self.p)
+        w, phi, psi = self.model.regressor(k)
+        a = phi[0] + psi[0] @ self.p
+        b = -(w[0] @ self.p)
         assert self.rls is not None
-        self.rls.update((float(a[0, 0]), float(a[0, 1])), (float(b[0, 0]), float(b[0, 1])))
+        m = self.rls.payload_kg if self.rls.n else 0.0
+        self.rls.update((float(a[0]), float(a[1])), (float(b[0]), float(b[1])),
+                        -(w[0] + m * psi[0]))
         return True
+
+    def _std(self) -> float:
+        """Total payload std: the pass's own noise and the calibration's uncertainty."""
+        assert self.rls is not None
+        return math.hypot(self.rls.std_kg, self.rls.param_std_kg(self.params.cov))
 
 
 def run_engine(samples: Iterable[Sample], engine: Engine) -> Iterator[Event]:

@@ -34,7 +34,7 @@ class ExclusionConfig:
     current_full_scale_a: float = 4000.0
     saturation_fraction: float = 0.98
     hoist_field_nominal_a: float = 70.0
-    weak_field_fraction: float = 0.92
+    weak_field_fraction: float = 0.97
     min_rope_current_a: float = 20.0
     static_rate_deg_s: float = 0.15
     static_crowd_m_s: float = 0.004

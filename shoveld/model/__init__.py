@@ -1,6 +1,6 @@
 """The shovel model: geometry, named terms, the regressor and parameter files."""
 
-from shoveld.model.geometry import G, L_BS, rope_geometry
+from shoveld.model.geometry import L_BS, G, rope_geometry
 from shoveld.model.kin import Kinematics
 from shoveld.model.model import EQUATIONS, Model
 from shoveld.model.terms import BASE_TERMS, TERMS, Term, register_term

@@ -46,9 +46,21 @@ class PayloadRls:
         self._prev_nu: np.ndarray | None = None
         self._corr_num = 0.0
         self._corr_den = 0.0
+        self._s_aa = 0.0
+        self._s_adb: np.ndarray | None = None
 
-    def update(self, a: tuple[float, float], b: tuple[float, float]) -> None:
-        """One sample: a * m = b for the handle and crowd equations."""
+    def update(self, a: tuple[float, float], b: tuple[float, float],
+               db_dp: np.ndarray | None = None) -> None:
+        """One sample: a * m = b for the handle and crowd equations.
+
+        ``db_dp`` (2, P), the sensitivity of the equations to the model parameters,
+        lets :meth:`param_std_kg` carry the calibration's uncertainty into the pass.
+        """
+        if db_dp is not None:
+            r_inv = 1.0 / np.diag(self.kf.R)
+            wa = np.asarray(a) * r_inv
+            self._s_aa += float(wa @ np.asarray(a))
+            self._s_adb = self._s_adb + wa @ db_dp if self._s_adb is not None else wa @ db_dp
         h, z = self._h, self._z
         h[0, 0], h[1, 0] = a
         z[0, 0], z[1, 0] = b
@@ -66,6 +78,14 @@ class PayloadRls:
     @property
     def payload_kg(self) -> float:
         return float(self.kf.x[0, 0]) if self.n else math.nan
+
+    def param_std_kg(self, cov: np.ndarray) -> float:
+        """Payload std due to the parameters' uncertainty (m = sum a b / sum a a is linear
+        in b, and b in the parameters)."""
+        if self._s_adb is None or self._s_aa <= 0:
+            return 0.0
+        g = self._s_adb / self._s_aa
+        return math.sqrt(max(0.0, float(g @ cov @ g)))
 
     @property
     def std_kg(self) -> float:

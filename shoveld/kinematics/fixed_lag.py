@@ -1,0 +1,54 @@
+"""Fixed-lag zero-phase joint rates for the payload equations of the live loop.
+
+The causal Kalman filter's acceleration lags by ~0.15 s, and because a lift
+starts and ends with the acceleration changing, that lag does not average out
+over a pass: it biased payloads by -0.5 % to +0.4 % of the load depending on the
+window (bench/kinematics_tradeoff.py). Evaluating the equations of motion half a
+window late, with the same Savitzky-Golay fit as identification and the currents
+of that same instant, removes the bias at the price of a quarter-second delay,
+which the operator never sees (the pass is final at the dump, seconds later).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from typing import Generic, TypeVar
+
+import numpy as np
+from scipy.signal import savgol_coeffs
+
+T = TypeVar("T")
+
+
+class FixedLagSavgol(Generic[T]):
+    """Push samples in; get (tag, derivatives) for the sample half a window ago."""
+
+    def __init__(self, window_s: float, dt: float, n_signals: int) -> None:
+        self.window = max(5, int(round(window_s / dt)) | 1)
+        self.half = self.window // 2
+        # Coefficients for the centre point: value, first and second derivative.
+        self.coeffs = np.stack([savgol_coeffs(self.window, 3, deriv=k, delta=dt, use="dot")
+                                for k in range(3)])
+        self.buf: deque[np.ndarray] = deque(maxlen=self.window)
+        self.tags: deque[T] = deque(maxlen=self.window)
+        self.n = n_signals
+        self.dt = dt
+        self._last_t = math.nan
+
+    def push(self, t: float, values: tuple[float, ...], tag: T
+             ) -> tuple[T, np.ndarray] | None:
+        """Add a sample; once the window is full, return the centre sample's tag and a
+        (3, n_signals) array of value, rate and acceleration. NaN or a time gap restarts."""
+        if any(math.isnan(v) for v in values) or (
+                not math.isnan(self._last_t) and t - self._last_t > 1.5 * self.dt):
+            self.buf.clear()
+            self.tags.clear()
+        self._last_t = t
+        if any(math.isnan(v) for v in values):
+            return None
+        self.buf.append(np.asarray(values, dtype=float))
+        self.tags.append(tag)
+        if len(self.buf) < self.window:
+            return None
+        return self.tags[self.half], self.coeffs @ np.stack(self.buf)
