@@ -23,12 +23,14 @@ A protocol plugs in with a ``measure(buf, start) -> int`` function:
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 NEED_MORE = 0
 NOT_A_FRAME = -1
 BAD_FRAME = -2
 
 Measure = Callable[[bytearray, int], int]
+Make = Callable[[bytearray, int, int], Any]
 
 
 class PacketSniffer:
@@ -37,17 +39,20 @@ class PacketSniffer:
     ``sync`` is the byte string every frame starts with (``b"\\xfa\\xff"`` for Xbus,
     ``b"\\n"``-terminated protocols can use the previous terminator). ``max_pending``
     bounds memory when a stream never yields a frame: the oldest bytes are dropped
-    and counted as rejected.
+    and counted as rejected. ``make(buf, start, length)`` builds what :meth:`feed`
+    returns for a frame (default: the frame's bytes), saving a second copy per frame.
     """
 
-    __slots__ = ("sync", "measure", "max_pending", "rejected_bytes", "bad_frames", "frames",
-                 "_buf")
+    __slots__ = ("sync", "measure", "make", "max_pending", "rejected_bytes", "bad_frames",
+                 "frames", "_buf")
 
-    def __init__(self, sync: bytes, measure: Measure, max_pending: int = 1 << 16) -> None:
+    def __init__(self, sync: bytes, measure: Measure, max_pending: int = 1 << 16,
+                 make: Make | None = None) -> None:
         if not sync:
             raise ValueError("sync marker must not be empty")
         self.sync = bytes(sync)
         self.measure = measure
+        self.make = make
         self.max_pending = max_pending
         self.rejected_bytes = 0
         self.bad_frames = 0
@@ -59,13 +64,14 @@ class PacketSniffer:
         """Bytes held back waiting for the rest of a frame."""
         return len(self._buf)
 
-    def feed(self, data: bytes | bytearray | memoryview) -> list[bytes]:
+    def feed(self, data: bytes | bytearray | memoryview) -> list[Any]:
         """Add bytes; return every complete valid frame now available, in stream order."""
         buf = self._buf
         buf += data
         out: list[bytes] = []
         sync = self.sync
         measure = self.measure
+        make = self.make
         pos = 0
         n = len(buf)
         while True:
@@ -84,7 +90,7 @@ class PacketSniffer:
                 self.rejected_bytes += i - pos
             r = measure(buf, i)
             if r > 0:
-                out.append(bytes(buf[i:i + r]))
+                out.append(bytes(buf[i:i + r]) if make is None else make(buf, i, r))
                 pos = i + r
                 continue
             if r == NEED_MORE:

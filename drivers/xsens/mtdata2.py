@@ -264,10 +264,16 @@ def iter_packets(payload: bytes | memoryview) -> Iterator[tuple[int, int, int]]:
 
 def decode_item(xdi: int, data: bytes | memoryview, offset: int, size: int) -> DataItem:
     """Decode one packet; never raises for bad sizes or unknown ids (returns raw bytes)."""
+    code, conv, name, prec, frame = _slot_plan(xdi, size)
+    vals = struct.unpack_from(">" + code, data, offset)
+    return DataItem(xdi, name, prec, frame, _convert(conv, vals, 0, len(vals)))
+
+
+def _slot_plan(xdi: int, size: int) -> tuple[str, str, str, int | None, int | None]:
+    """How to unpack one packet: (struct code, conversion, name, precision, frame)."""
     t = ITEM_TYPES.get(xdi & TYPE_MASK)
     if t is None:
-        return DataItem(xdi, f"Unknown0x{xdi:04X}", None, None,
-                        bytes(data[offset:offset + size]))
+        return f"{size}s", "bytes", f"Unknown0x{xdi:04X}", None, None
     kind = t.kind
     if kind == "real":
         prec = xdi & PRECISION_MASK
@@ -275,31 +281,120 @@ def decode_item(xdi: int, data: bytes | memoryview, offset: int, size: int) -> D
         psize = PRECISION_SIZE[prec]
         n = size // psize
         if size % psize or (t.count and n != t.count) or n == 0:
-            return DataItem(xdi, t.name + "?", prec, frame, bytes(data[offset:offset + size]))
-        return DataItem(xdi, t.name, prec, frame, decode_reals(data, prec, offset, n))
+            return f"{size}s", "bytes", t.name + "?", prec, frame
+        code = {FLOAT32: "f", FP1220: "i", FP1632: "Ih", FLOAT64: "d"}[prec] * n
+        return code, ("float", "fp1220", "fp1632", "float")[prec], t.name, prec, frame
     if kind == "utc":
-        if size != _UTC.size:
-            return DataItem(xdi, t.name + "?", None, None, bytes(data[offset:offset + size]))
-        return DataItem(xdi, t.name, None, None, UtcTime(*_UTC.unpack_from(data, offset)))
+        ok = size == _UTC.size
+        return (_UTC.format[1:], "utc", t.name, None, None) if ok else (
+            f"{size}s", "bytes", t.name + "?", None, None)
     if kind == "pvt":
-        if size != _PVT.size:
-            return DataItem(xdi, t.name + "?", None, None, bytes(data[offset:offset + size]))
-        return DataItem(xdi, t.name, None, None,
-                        dict(zip(GNSS_PVT_FIELDS, _PVT.unpack_from(data, offset), strict=True)))
+        ok = size == _PVT.size
+        return (_PVT.format[1:], "pvt", t.name, None, None) if ok else (
+            f"{size}s", "bytes", t.name + "?", None, None)
     if kind == "raw":
-        return DataItem(xdi, t.name, None, None, bytes(data[offset:offset + size]))
+        return f"{size}s", "bytes", t.name, None, None
     s = _int_structs.get(kind)
     if s is None:
         s = _int_structs[kind] = struct.Struct(kind)
     if size != s.size:
-        return DataItem(xdi, t.name + "?", None, None, bytes(data[offset:offset + size]))
-    v = s.unpack_from(data, offset)
-    return DataItem(xdi, t.name, None, None, v[0] if len(v) == 1 else v)
+        return f"{size}s", "bytes", t.name + "?", None, None
+    return kind[1:], ("int" if len(kind) == 2 else "ints"), t.name, None, None
+
+
+def _convert(conv: str, vals: tuple[Any, ...], a: int, b: int) -> Any:
+    if conv == "float":
+        return vals[a:b]
+    if conv == "int" or conv == "bytes":
+        return vals[a]
+    if conv == "fp1220":
+        return tuple(v / _TWO20 for v in vals[a:b])
+    if conv == "fp1632":
+        return tuple((vals[k + 1] * 4294967296 + vals[k]) / _TWO32 for k in range(a, b, 2))
+    if conv == "utc":
+        return UtcTime(*vals[a:b])
+    if conv == "pvt":
+        return dict(zip(GNSS_PVT_FIELDS, vals[a:b], strict=True))
+    return vals[a:b]  # "ints"
+
+
+class _Layout:
+    """A compiled MTData2 layout: one struct call checks all headers, one unpacks all data.
+
+    Consecutive MTData2 messages of a configured device have the same packet sequence,
+    so decoding is two C-level ``unpack_from`` calls plus a short loop per message.
+    """
+
+    __slots__ = ("heads", "expect", "data", "slots")
+
+    def __init__(self, payload: bytes | memoryview) -> None:
+        packets = list(iter_packets(payload))
+        total = len(payload)
+        head_fmt = [">"]
+        data_fmt = [">"]
+        expect: list[int] = []
+        self.slots: list[tuple[int, str, str, int | None, int | None, int, int]] = []
+        pos = 0
+        nvals = 0
+        for xdi, off, size in packets:
+            code, conv, name, prec, frame = _slot_plan(xdi, size)
+            head_fmt.append(f"HB{size}x")
+            expect += [xdi, size]
+            data_fmt.append(f"3x{code}")
+            n = len(struct.unpack_from(">" + code, bytes(size)))
+            self.slots.append((xdi, name, conv, prec, frame, nvals, nvals + n))
+            nvals += n
+            pos = off + size
+        tail = total - pos
+        if tail >= 3:  # a header whose size overruns the payload ended the walk: check it too
+            head_fmt.append(f"HB{tail - 3}x")
+            expect += [(payload[pos] << 8) | payload[pos + 1], payload[pos + 2]]
+        elif tail:
+            head_fmt.append(f"{tail}x")
+        self.heads = struct.Struct("".join(head_fmt))
+        self.expect = tuple(expect)
+        self.data = struct.Struct("".join(data_fmt))
+
+
+_layouts: dict[int, list[_Layout]] = {}
+_MAX_LAYOUTS = 512
+
+
+def _layout(payload: bytes | memoryview) -> _Layout:
+    n = len(payload)
+    cands = _layouts.get(n)
+    if cands:
+        for lay in cands:
+            if lay.heads.unpack_from(payload) == lay.expect:
+                return lay
+    lay = _Layout(payload)
+    if sum(len(v) for v in _layouts.values()) >= _MAX_LAYOUTS:
+        _layouts.clear()  # random input (fuzzing, noise) must not grow memory
+    _layouts.setdefault(n, []).append(lay)
+    return lay
 
 
 def decode_mtdata2(payload: bytes | memoryview) -> list[DataItem]:
-    """Decode every packet of an MTData2 payload, in order."""
-    return [decode_item(x, payload, o, s) for x, o, s in iter_packets(payload)]
+    """Decode every packet of an MTData2 payload, in order (a truncated tail is ignored)."""
+    lay = _layout(payload)
+    vals = lay.data.unpack_from(payload)
+    return [DataItem(xdi, name, prec, frame, _convert(conv, vals, a, b))
+            for xdi, name, conv, prec, frame, a, b in lay.slots]
+
+
+def mtdata2_values(payload: bytes | memoryview) -> dict[int, Any]:
+    """Fast path for drivers: ``{xdi & 0xFFF0: value}`` of the well-formed packets."""
+    lay = _layout(payload)
+    vals = lay.data.unpack_from(payload)
+    out: dict[int, Any] = {}
+    for xdi, _name, conv, _prec, _frame, a, b in lay.slots:
+        if conv == "float":
+            out[xdi & TYPE_MASK] = vals[a:b]
+        elif conv == "int":
+            out[xdi & TYPE_MASK] = vals[a]
+        elif conv != "bytes":
+            out[xdi & TYPE_MASK] = _convert(conv, vals, a, b)
+    return out
 
 
 def encode_item(xdi: int, value: Any) -> bytes:

@@ -43,12 +43,11 @@ from drivers.xsens.mtdata2 import (
     FRAME_BY_NAME,
     MAX_FREQUENCY,
     PRECISION_BY_NAME,
-    TYPE_MASK,
     XDI,
-    decode_mtdata2,
     decode_output_configuration,
     encode_output_configuration,
     item_label,
+    mtdata2_values,
 )
 from drivers.xsens.orientation import quat_to_euler_deg
 from drivers.xsens.xbus import MID, MID_NAMES, XbusMessage, XbusParser, describe_error, encode_frame
@@ -61,6 +60,7 @@ BAUD_RATES = (4800, 9600, 14400, 19200, 28800, 38400, 57600, 115200, 230400, 460
 
 VALUE_KEYS = ("roll_deg", "pitch_deg", "yaw_deg", "gyr_x", "gyr_y", "gyr_z", "acc_x", "acc_y",
               "acc_z", "packet_counter", "sample_time_fine", "status_word")
+_NO_INVALID: frozenset[str] = frozenset()
 SAMPLE_TIME_FINE_S = 1e-4
 """SampleTimeFine counts a 10 kHz clock (MTi documentation; CAN 'SampleTime' note)."""
 
@@ -287,34 +287,33 @@ class MtiSerialDriver(Driver):
     def decode(self, payload: bytes) -> Reading | None:
         """One MTData2 payload -> Reading (quantities the packet lacks are marked invalid)."""
         t_host = self.clock()
+        items = mtdata2_values(payload)
         values: dict[str, float] = {}
-        quat = None
-        for item in decode_mtdata2(payload):
-            t = item.xdi & TYPE_MASK
-            v = item.value
-            if item.name.endswith("?"):
-                continue
-            if t == XDI.EULER_ANGLES:
-                values["roll_deg"], values["pitch_deg"], values["yaw_deg"] = v
-            elif t == XDI.QUATERNION:
-                quat = v
-            elif t == XDI.RATE_OF_TURN:
-                values["gyr_x"], values["gyr_y"], values["gyr_z"] = v
-            elif t == XDI.ACCELERATION:
-                values["acc_x"], values["acc_y"], values["acc_z"] = v
-            elif t == XDI.PACKET_COUNTER:
-                values["packet_counter"] = float(v)
-                self._count_gap(v)
-            elif t == XDI.SAMPLE_TIME_FINE:
-                values["sample_time_fine"] = float(v)
-            elif t == XDI.STATUS_WORD:
-                values["status_word"] = float(v)
-        if quat is not None and "roll_deg" not in values:
-            values["roll_deg"], values["pitch_deg"], values["yaw_deg"] = quat_to_euler_deg(quat)
+        v = items.get(XDI.EULER_ANGLES)
+        if v is None and XDI.QUATERNION in items:
+            v = quat_to_euler_deg(items[XDI.QUATERNION])
+        if v is not None:
+            values["roll_deg"], values["pitch_deg"], values["yaw_deg"] = v
+        v = items.get(XDI.RATE_OF_TURN)
+        if v is not None:
+            values["gyr_x"], values["gyr_y"], values["gyr_z"] = v
+        v = items.get(XDI.ACCELERATION)
+        if v is not None:
+            values["acc_x"], values["acc_y"], values["acc_z"] = v
+        v = items.get(XDI.PACKET_COUNTER)
+        if v is not None:
+            values["packet_counter"] = float(v)
+            self._count_gap(v)
+        stf = items.get(XDI.SAMPLE_TIME_FINE)
+        if stf is not None:
+            values["sample_time_fine"] = float(stf)
+        v = items.get(XDI.STATUS_WORD)
+        if v is not None:
+            values["status_word"] = float(v)
         if not values:
             return None
-        invalid = frozenset(k for k in VALUE_KEYS if k not in values)
-        stf = values.get("sample_time_fine")
+        invalid = _NO_INVALID if len(values) == len(VALUE_KEYS) else frozenset(
+            k for k in VALUE_KEYS if k not in values)
         return Reading(device=self.name, t_host=t_host, values=values, invalid=invalid,
                        t_device=stf * SAMPLE_TIME_FINE_S if stf is not None else None)
 

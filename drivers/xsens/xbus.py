@@ -136,7 +136,8 @@ class XbusParser:
         if not 254 <= max_payload <= 0xFFFF:
             raise ValueError(f"max_payload must be in [254, 65535], got {max_payload}")
         self.max_payload = max_payload
-        self._sniffer = PacketSniffer(SYNC, self._measure, max_pending=max_payload + 16)
+        self._sniffer = PacketSniffer(SYNC, self._measure, max_pending=max_payload + 16,
+                                      make=self._make)
 
     def _measure(self, buf: bytearray, i: int) -> int:
         n = len(buf)
@@ -154,19 +155,19 @@ class XbusParser:
             total = ln + 5
         if n - i < total:
             return NEED_MORE
-        if sum(memoryview(buf)[i + 1:i + total]) & 0xFF:
+        if sum(buf[i + 1:i + total]) & 0xFF:
             return BAD_FRAME
         return total
 
+    @staticmethod
+    def _make(buf: bytearray, i: int, n: int) -> XbusMessage:
+        if buf[i + 3] == EXTENDED_LENGTH:
+            return XbusMessage(buf[i + 2], bytes(buf[i + 6:i + n - 1]))
+        return XbusMessage(buf[i + 2], bytes(buf[i + 4:i + n - 1]))
+
     def feed(self, data: bytes | bytearray | memoryview) -> list[XbusMessage]:
         """Add received bytes; return the complete checked messages, in order."""
-        out = []
-        for f in self._sniffer.feed(data):
-            if f[3] == EXTENDED_LENGTH:
-                out.append(XbusMessage(f[2], f[6:-1]))
-            else:
-                out.append(XbusMessage(f[2], f[4:-1]))
-        return out
+        return self._sniffer.feed(data)
 
     def finish(self) -> int:
         """End of stream: count a trailing partial frame as rejected; return its size."""

@@ -37,6 +37,8 @@ from drivers.xsens.mtdata2 import (
     encode_output_configuration,
     encode_reals,
     item_label,
+    iter_packets,
+    mtdata2_values,
     quantize,
 )
 from drivers.xsens.orientation import (
@@ -177,3 +179,21 @@ def test_matrix_and_gravity_agree_with_quaternion() -> None:
     g = gravity_in_sensor(r, p)
     assert all(math.isclose(a, 9.81 * b, abs_tol=1e-12)
                for a, b in zip(g, (m[2][0], m[2][1], m[2][2]), strict=True))
+
+
+xdi_st = st.one_of(st.sampled_from(sorted(ITEM_TYPES)), st.integers(0, 0xFFFF)).flatmap(
+    lambda t: st.integers(0, 15).map(lambda low: (t & 0xFFF0) | low))
+packet_st = st.tuples(xdi_st, st.binary(max_size=40)).map(
+    lambda xb: struct.pack(">HB", xb[0], len(xb[1])) + xb[1])
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(packet_st, max_size=8), st.binary(max_size=4))
+def test_compiled_layouts_match_item_by_item_decoding(packets: list[bytes], tail: bytes
+                                                      ) -> None:
+    payload = b"".join(packets) + tail
+    ref = [decode_item(x, payload, o, s) for x, o, s in iter_packets(payload)]
+    for _ in range(2):  # second time through the layout cache
+        assert repr(decode_mtdata2(payload)) == repr(ref)
+    expected = {i.xdi & 0xFFF0: i.value for i in ref if not isinstance(i.value, bytes)}
+    assert repr(mtdata2_values(payload)) == repr(expected)
