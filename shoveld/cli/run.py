@@ -1,0 +1,73 @@
+"""``shoveld run``: the service on the shovel's computer (systemd's ExecStart)."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import threading
+
+from shoveld.cli import CliError
+
+log = logging.getLogger("shoveld.run")
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    from shoveld.daemon.config import DEFAULT_CONFIG
+
+    p = sub.add_parser(
+        "run", help="run the payload monitor service",
+        description="Starts one thread per configured device, the fixed-rate loop (engine, "
+                    "payload, trucks), the pass log and Zenoh publishing. Stops cleanly on "
+                    "SIGTERM/SIGINT; under systemd it sends READY and watchdog pings.")
+    p.add_argument("--config", default=DEFAULT_CONFIG, help=f"TOML file (default "
+                   f"{DEFAULT_CONFIG})")
+    p.add_argument("--state-dir", default=None,
+                   help="override shovel.state_dir (where the pass log lives)")
+    p.add_argument("--duration", type=float, default=None,
+                   help="stop after this many seconds (tests, trials)")
+    p.set_defaults(func=run)
+
+
+def install_stop_signals(stop: threading.Event) -> None:
+    """SIGTERM/SIGINT set ``stop``; the loop ends at its next tick."""
+    def handler(signum: int, frame: object) -> None:
+        log.info("signal %d: stopping", signum)
+        stop.set()
+    signal.signal(signal.SIGTERM, handler)
+    signal.signal(signal.SIGINT, handler)
+
+
+def run(args: argparse.Namespace) -> int:
+    import dataclasses
+    from pathlib import Path
+
+    from shoveld.daemon.config import ConfigError, check_params, load_config
+    from shoveld.daemon.logs import setup_logging
+    from shoveld.daemon.service import Service
+
+    try:
+        cfg = load_config(args.config)
+        if args.state_dir:
+            cfg = dataclasses.replace(cfg, state_dir=Path(args.state_dir))
+        params = check_params(cfg)
+    except ConfigError as e:
+        raise CliError(f"refusing to start: {e}") from None
+    setup_logging("DEBUG" if args.verbose > 1 else "INFO" if args.verbose else cfg.log_level)
+    stop = threading.Event()
+    install_stop_signals(stop)
+    if args.duration is not None:
+        threading.Timer(args.duration, stop.set).start()
+    try:
+        service = Service(cfg, params)
+    except ValueError as e:
+        raise CliError(f"refusing to start: {e}") from None
+    log.info("shoveld %s starting: %d devices, loop %.0f Hz, state %s", cfg.shovel_id,
+             len(cfg.devices), cfg.loop.rate_hz, cfg.state_dir)
+    try:
+        service.start()
+        service.run(stop)
+    finally:
+        service.close()
+    log.info("stopped")
+    return 0

@@ -1,0 +1,107 @@
+"""The health message: what each driver, the loop, Zenoh and the pass log are doing.
+
+Published on ``<prefix>/<id>/health`` every ``loop.health_period_s`` and part of the
+status query. It exists so that a sensor that stops or babbles, a Modbus module
+that times out or a network that is gone is *said* (``problems`` lists them in
+words) instead of showing up as a wrong number somewhere else.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from drivers.base import Driver
+from shoveld.daemon.assemble import DeviceState
+from shoveld.daemon.store import ReadingStore
+
+
+class LatencyStats:
+    """Ring of arrival-to-publish latencies (seconds)."""
+
+    def __init__(self, window: int = 4000, keep_all: bool = False) -> None:
+        self._v = np.zeros(window)
+        self._n = 0
+        self.keep_all = keep_all
+        self.all: list[float] = []
+
+    def add(self, x: float) -> None:
+        self._v[self._n % len(self._v)] = x
+        self._n += 1
+        if self.keep_all:
+            self.all.append(x)
+
+    def as_dict(self) -> dict[str, Any] | None:
+        n = min(self._n, len(self._v))
+        if not n:
+            return None
+        v = self._v[:n]
+        p50, p99 = np.percentile(v, [50, 99])
+        return {"p50": round(1e3 * p50, 3), "p99": round(1e3 * p99, 3),
+                "max": round(1e3 * float(v.max()), 3), "n": self._n}
+
+
+class RateMeter:
+    """Readings per second of each device over the last health period (clock time)."""
+
+    def __init__(self) -> None:
+        self._prev: dict[str, tuple[float, int]] = {}
+
+    def rate(self, device: str, t: float, count: int) -> float | None:
+        prev = self._prev.get(device)
+        self._prev[device] = (t, count)
+        if prev is None or t <= prev[0]:
+            return None
+        return round((count - prev[1]) / (t - prev[0]), 2)
+
+
+def driver_health(name: str, driver: Driver | None, state: DeviceState, store: ReadingStore,
+                  rates: RateMeter, t: float) -> dict[str, Any]:
+    d: dict[str, Any] = {"state": state.state,
+                         "age_s": None if state.age_s is None else round(state.age_s, 4),
+                         "rate_hz": rates.rate(name, t, store.count(name)),
+                         "readings": store.count(name)}
+    if state.invalid:
+        d["invalid_signals"] = list(state.invalid)
+    if driver is not None:
+        h = driver.health
+        d.update({"connected": h.connected, "messages": h.messages,
+                  "bad_frames": h.bad_frames, "rejected_bytes": h.rejected_bytes,
+                  "timeouts": h.timeouts, "reconnects": h.reconnects,
+                  "last_error": h.last_error})
+        for k, v in h.extra.items():
+            d.setdefault(k, v)
+    return d
+
+
+def problems(drivers: Mapping[str, dict[str, Any]], loop: dict[str, Any],
+             zenoh: dict[str, Any], persist: dict[str, Any]) -> list[str]:
+    """Plain-language list of what is wrong (empty: all well)."""
+    out: list[str] = []
+    for name, d in drivers.items():
+        st = d.get("state")
+        if st == "disconnected":
+            out.append(f"{name}: disconnected ({d.get('last_error') or 'no connection'})")
+        elif st == "no_data":
+            out.append(f"{name}: no data yet")
+        elif st == "stale":
+            out.append(f"{name}: no reading for {d.get('age_s')} s")
+        elif st == "invalid":
+            out.append(f"{name}: invalid {', '.join(d.get('invalid_signals', []))}")
+        if d.get("babbling"):
+            out.append(f"{name}: babbling (malformed data)")
+        chans = d.get("channels")
+        if isinstance(chans, dict):
+            bad = [c for c, h in chans.items() if isinstance(h, dict)
+                   and h.get("state") not in ("ok", None)]
+            if bad:
+                out.append(f"{name}: channels {', '.join(bad)} not answering")
+    if not zenoh.get("open"):
+        out.append(f"zenoh: session not open ({zenoh.get('last_error') or 'connecting'})")
+    if persist.get("last_error"):
+        out.append(f"pass log: {persist['last_error']}")
+    if loop.get("overruns_recent"):
+        out.append(f"loop: {loop['overruns_recent']} overruns in the last period")
+    return out

@@ -1,0 +1,206 @@
+"""The pass log: SQLite in WAL mode under the state directory.
+
+A finished pass is committed (``synchronous=FULL``: on disk, not only in the OS
+cache) before anything is published about it, so a subscriber never sees a pass
+the shovel could forget. SQLite's journal makes every write all-or-nothing, which
+is what lets the daemon be killed at any instant (``SIGKILL`` mid-write included)
+and come back with every finished pass and the current truck. Readers (``shoveld
+passes``) work concurrently thanks to WAL.
+"""
+
+from __future__ import annotations
+
+import logging
+import sqlite3
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+log = logging.getLogger(__name__)
+
+SCHEMA_VERSION = 1
+DB_NAME = "passes.sqlite"
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS passes (
+    pass INTEGER PRIMARY KEY,
+    truck INTEGER NOT NULL,
+    shovel TEXT NOT NULL,
+    start_unix REAL NOT NULL,
+    end_unix REAL NOT NULL,
+    start_s REAL NOT NULL,
+    end_s REAL NOT NULL,
+    payload_kg REAL,
+    std_kg REAL,
+    samples INTEGER NOT NULL,
+    valid INTEGER NOT NULL,
+    reason TEXT NOT NULL DEFAULT '',
+    written_unix REAL NOT NULL
+);
+CREATE INDEX IF NOT EXISTS passes_end ON passes(end_unix);
+CREATE TABLE IF NOT EXISTS trucks (
+    truck INTEGER PRIMARY KEY,
+    target_kg REAL NOT NULL,
+    opened_unix REAL NOT NULL,
+    closed_unix REAL
+);
+"""
+
+
+@dataclass
+class Restored:
+    """Where the engine picks up after a restart."""
+
+    next_pass: int = 1
+    truck: int = 1
+    truck_passes: list[dict[str, Any]] = field(default_factory=list)
+    last_dump_unix: float | None = None
+
+
+def db_path(state_dir: str | Path) -> Path:
+    return Path(state_dir) / DB_NAME
+
+
+def connect(path: str | Path, readonly: bool = False) -> sqlite3.Connection:
+    """Open the pass log (WAL, FULL sync); a reader may not create it."""
+    p = Path(path)
+    if readonly:
+        if not p.exists():
+            raise FileNotFoundError(f"{p}: no pass log here (has the daemon run?)")
+        con = sqlite3.connect(f"file:{p}?mode=ro", uri=True, timeout=5.0,
+                              check_same_thread=False)
+        con.execute("PRAGMA busy_timeout = 5000")
+        return con
+    p.parent.mkdir(parents=True, exist_ok=True)
+    con = sqlite3.connect(str(p), timeout=5.0, isolation_level=None, check_same_thread=False)
+    con.execute("PRAGMA busy_timeout = 5000")
+    mode = con.execute("PRAGMA journal_mode = WAL").fetchone()[0]
+    if str(mode).lower() != "wal":
+        log.warning("%s: journal_mode is %s, not WAL", p, mode)
+    con.execute("PRAGMA synchronous = FULL")
+    con.executescript(_SCHEMA)
+    con.execute("INSERT OR IGNORE INTO meta(key, value) VALUES ('schema', ?)",
+                (str(SCHEMA_VERSION),))
+    return con
+
+
+def _row_to_pass(row: sqlite3.Row | tuple[Any, ...]) -> dict[str, Any]:
+    (pass_, truck, start_s, end_s, payload, std, samples, valid, reason) = row
+    return {"pass": pass_, "truck": truck, "start_s": start_s, "end_s": end_s,
+            "payload_kg": payload, "std_kg": std, "samples": samples, "valid": bool(valid),
+            "reason": reason}
+
+
+class PassLog:
+    """Writes passes and truck closures; restores the current truck."""
+
+    def __init__(self, path: str | Path, shovel: str) -> None:
+        self.path = Path(path)
+        self.shovel = shovel
+        self.con = connect(self.path)
+        self.writes = 0
+
+    def close(self) -> None:
+        try:
+            self.con.close()
+        except sqlite3.Error:
+            pass
+
+    def restore(self) -> Restored:
+        c = self.con
+        last = c.execute("SELECT max(pass) FROM passes").fetchone()[0]
+        r = Restored(next_pass=(last or 0) + 1)
+        row = c.execute("SELECT truck FROM trucks WHERE closed_unix IS NULL "
+                        "ORDER BY truck DESC LIMIT 1").fetchone()
+        max_truck = c.execute("SELECT max(truck) FROM trucks").fetchone()[0] or 0
+        if row is not None and row[0] == max_truck:
+            r.truck = row[0]
+            rows = c.execute("SELECT pass, truck, start_s, end_s, payload_kg, std_kg, samples, "
+                             "valid, reason FROM passes WHERE truck = ? ORDER BY pass",
+                             (r.truck,)).fetchall()
+            r.truck_passes = [_row_to_pass(x) for x in rows]
+        else:
+            r.truck = max_truck + 1
+        end = c.execute("SELECT end_unix FROM passes ORDER BY pass DESC LIMIT 1").fetchone()
+        r.last_dump_unix = end[0] if end else None
+        return r
+
+    def write_pass(self, p: dict[str, Any], start_unix: float, end_unix: float,
+                   target_kg: float) -> bool:
+        """Commit one finished pass (and open its truck); False if it was already there."""
+        c = self.con
+        now = time.time()
+        try:
+            c.execute("BEGIN IMMEDIATE")
+            c.execute("INSERT OR IGNORE INTO trucks(truck, target_kg, opened_unix) "
+                      "VALUES (?, ?, ?)", (p["truck"], target_kg, start_unix))
+            c.execute("INSERT INTO passes(pass, truck, shovel, start_unix, end_unix, start_s, "
+                      "end_s, payload_kg, std_kg, samples, valid, reason, written_unix) "
+                      "VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?)",
+                      (p["pass"], p["truck"], self.shovel, start_unix, end_unix, p["start_s"],
+                       p["end_s"], p["payload_kg"], p["std_kg"], p["samples"],
+                       int(bool(p["valid"])), p.get("reason", ""), now))
+            c.execute("COMMIT")
+        except sqlite3.IntegrityError:
+            c.execute("ROLLBACK")
+            log.error("pass %s is already in the pass log; not written again", p["pass"])
+            return False
+        except BaseException:
+            if c.in_transaction:
+                c.execute("ROLLBACK")
+            raise
+        self.writes += 1
+        return True
+
+    def close_truck(self, truck: int, target_kg: float, closed_unix: float) -> None:
+        c = self.con
+        c.execute("BEGIN IMMEDIATE")
+        try:
+            c.execute("INSERT OR IGNORE INTO trucks(truck, target_kg, opened_unix) "
+                      "VALUES (?, ?, ?)", (truck, target_kg, closed_unix))
+            c.execute("UPDATE trucks SET closed_unix = ? WHERE truck = ? AND closed_unix IS NULL",
+                      (closed_unix, truck))
+            c.execute("COMMIT")
+        except BaseException:
+            if c.in_transaction:
+                c.execute("ROLLBACK")
+            raise
+
+    def closed_truck_totals(self, since_unix: float) -> list[tuple[int, float, float]]:
+        """(truck, total of valid passes, target) of trucks closed since ``since_unix``."""
+        rows = self.con.execute(
+            "SELECT t.truck, coalesce(sum(CASE WHEN p.valid THEN p.payload_kg END), 0), "
+            "t.target_kg FROM trucks t LEFT JOIN passes p ON p.truck = t.truck "
+            "WHERE t.closed_unix IS NOT NULL AND t.closed_unix >= ? GROUP BY t.truck "
+            "ORDER BY t.truck", (since_unix,)).fetchall()
+        return [(int(a), float(b), float(c)) for a, b, c in rows]
+
+
+PASS_COLUMNS = ("pass", "truck", "shovel", "start", "end", "payload_kg", "std_kg", "samples",
+                "valid", "reason")
+
+
+def read_passes(path: str | Path, since_unix: float | None = None,
+                until_unix: float | None = None) -> list[dict[str, Any]]:
+    """Passes that ended in [since, until), oldest first (for shift reports)."""
+    con = connect(path, readonly=True)
+    try:
+        q = ("SELECT pass, truck, shovel, start_unix, end_unix, payload_kg, std_kg, samples, "
+             "valid, reason FROM passes WHERE end_unix >= ? AND end_unix < ? ORDER BY pass")
+        rows = con.execute(q, (since_unix if since_unix is not None else -1e18,
+                               until_unix if until_unix is not None else 1e18)).fetchall()
+        trucks = {int(t): (target, closed) for t, target, closed in con.execute(
+            "SELECT truck, target_kg, closed_unix FROM trucks")}
+    finally:
+        con.close()
+    out = []
+    for r in rows:
+        d = dict(zip(PASS_COLUMNS, r, strict=True))
+        d["valid"] = bool(d["valid"])
+        target, closed = trucks.get(int(d["truck"]), (None, None))
+        d["truck_target_kg"] = target
+        d["truck_closed"] = closed is not None
+        out.append(d)
+    return out

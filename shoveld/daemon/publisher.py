@@ -1,0 +1,219 @@
+"""Zenoh to the cab and the office: JSON under ``<prefix>/<id>/``, liveliness, status query.
+
+Topics (encoding ``application/json``): ``joints``, ``payload/live``, ``pass``,
+``truck``, ``health``; the liveliness token ``<prefix>/<id>/alive`` and the
+queryable ``<prefix>/<id>/status``. The session is opened by a background thread
+that retries with back-off, because in client mode Zenoh's ``open`` fails (or
+waits) while no router is reachable, and the shovel must weigh whether or not the
+site network is up. Until it is open, messages are counted as dropped. Loop-side
+topics use congestion control DROP, so a slow or vanished subscriber can never
+stall the loop; passes and trucks, published from the pass-log thread, use BLOCK.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+from shoveld.daemon.config import ZenohConfig
+
+log = logging.getLogger(__name__)
+
+TOPICS = ("joints", "payload/live", "pass", "truck", "health")
+RELIABLE_TOPICS = frozenset({"pass", "truck"})
+
+
+def zenoh_config(mode: str, listen: tuple[str, ...] | list[str] = (),
+                 connect: tuple[str, ...] | list[str] = (), multicast: bool = False,
+                 extra: dict[str, Any] | None = None) -> Any:
+    """A ``zenoh.Config`` from the few settings shoveld uses (plus raw extra keys)."""
+    import zenoh
+
+    c = zenoh.Config()
+    c.insert_json5("mode", json.dumps(mode))
+    c.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    c.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    c.insert_json5("scouting/multicast/enabled", json.dumps(bool(multicast)))
+    for k, v in (extra or {}).items():
+        c.insert_json5(k, json.dumps(v))
+    return c
+
+
+def _clean(o: Any) -> Any:
+    """JSON has no NaN: unknown numbers become null (never a made-up number)."""
+    if isinstance(o, float):
+        return o if math.isfinite(o) else None
+    if isinstance(o, dict):
+        return {k: _clean(v) for k, v in o.items()}
+    if isinstance(o, list | tuple):
+        return [_clean(v) for v in o]
+    return o
+
+
+def dumps(obj: Any) -> str:
+    return json.dumps(_clean(obj), separators=(",", ":"), allow_nan=False)
+
+
+class Publisher:
+    """Owns the Zenoh session of the daemon; ``put`` never blocks the caller for long."""
+
+    def __init__(self, cfg: ZenohConfig, shovel_id: str,
+                 status: Callable[[], dict[str, Any]] | None = None,
+                 retry_s: tuple[float, float] = (0.5, 10.0)) -> None:
+        self.cfg = cfg
+        self.base = f"{cfg.prefix}/{shovel_id}"
+        self.status = status or (lambda: {})
+        self.retry_s = retry_s
+        self._session: Any = None
+        self._pubs: dict[str, Any] = {}
+        self._decls: list[Any] = []
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._lock = threading.Lock()
+        self.sent = 0
+        self.dropped = 0
+        self.errors = 0
+        self.queries = 0
+        self.last_error: str | None = None
+        self.opened = threading.Event()
+
+    def key(self, topic: str) -> str:
+        return f"{self.base}/{topic}"
+
+    # -- session lifecycle -----------------------------------------------------------------
+    def start(self, wait_s: float = 0.0) -> Publisher:
+        """Open the session in the background; optionally wait up to ``wait_s`` for it."""
+        self._thread = threading.Thread(target=self._connect, name="zenoh-open", daemon=True)
+        self._thread.start()
+        if wait_s > 0:
+            self.opened.wait(wait_s)
+        return self
+
+    def _connect(self) -> None:
+        import zenoh
+
+        delay = self.retry_s[0]
+        while not self._stop.is_set():
+            c = self.cfg
+            try:
+                session = zenoh.open(zenoh_config(c.mode, c.listen, c.connect,
+                                                  c.multicast_scouting, c.extra))
+            except Exception as e:  # noqa: BLE001 - zenoh.ZError and config errors
+                self.last_error = f"zenoh open: {e}"
+                log.warning("zenoh: cannot open session (%s); retrying in %.1f s", e, delay)
+                if self._stop.wait(delay):
+                    return
+                delay = min(2 * delay, self.retry_s[1])
+                continue
+            try:
+                self._declare(session)
+            except Exception as e:  # noqa: BLE001
+                self.last_error = f"zenoh declare: {e}"
+                log.error("zenoh: %s", e)
+                session.close()
+                if self._stop.wait(delay):
+                    return
+                continue
+            with self._lock:
+                if self._stop.is_set():
+                    session.close()
+                    return
+                self._session = session
+            self.last_error = None
+            log.info("zenoh: %s session open (listen %s, connect %s) publishing under %s/",
+                     c.mode, list(c.listen), list(c.connect), self.base)
+            self.opened.set()
+            return
+
+    def _declare(self, session: Any) -> None:
+        import zenoh
+
+        pubs = {}
+        for topic in TOPICS:
+            reliable = topic in RELIABLE_TOPICS
+            pubs[topic] = session.declare_publisher(
+                self.key(topic), encoding=zenoh.Encoding.APPLICATION_JSON,
+                congestion_control=(zenoh.CongestionControl.BLOCK if reliable
+                                    else zenoh.CongestionControl.DROP),
+                priority=zenoh.Priority.DATA_HIGH if reliable else zenoh.Priority.DATA)
+        token = session.liveliness().declare_token(self.key("alive"))
+        queryable = session.declare_queryable(self.key("status"), self._on_query)
+        self._pubs = pubs
+        self._decls = [token, queryable, *pubs.values()]
+
+    def _on_query(self, query: Any) -> None:
+        import zenoh
+
+        self.queries += 1
+        try:
+            query.reply(self.key("status"), dumps(self.status()),
+                        encoding=zenoh.Encoding.APPLICATION_JSON)
+        except Exception as e:  # noqa: BLE001 - a bad query must not kill the callback thread
+            self.errors += 1
+            log.warning("zenoh: status query: %s", e)
+
+    def close(self) -> None:
+        self._stop.set()
+        with self._lock:
+            session, self._session = self._session, None
+            decls, self._decls = self._decls, []
+            self._pubs = {}
+        for d in decls:
+            try:
+                d.undeclare()
+            except Exception:  # noqa: BLE001
+                pass
+        if session is not None:
+            try:
+                session.close()
+            except Exception:  # noqa: BLE001
+                pass
+        if self._thread is not None:
+            self._thread.join(timeout=5)
+
+    # -- publishing ------------------------------------------------------------------------
+    @property
+    def connected(self) -> bool:
+        return self._session is not None
+
+    def put(self, topic: str, obj: dict[str, Any]) -> bool:
+        pub = self._pubs.get(topic)
+        if pub is None:
+            self.dropped += 1
+            return False
+        try:
+            pub.put(dumps(obj))
+        except Exception as e:  # noqa: BLE001 - never let the network take the loop down
+            self.errors += 1
+            self.last_error = f"put {topic}: {e}"
+            return False
+        self.sent += 1
+        return True
+
+    def health(self) -> dict[str, Any]:
+        d: dict[str, Any] = {"mode": self.cfg.mode, "open": self.connected, "sent": self.sent,
+                             "dropped": self.dropped, "errors": self.errors,
+                             "queries": self.queries, "last_error": self.last_error}
+        s = self._session
+        if s is not None:
+            try:
+                d["routers"] = len(list(s.info.routers_zid()))
+                d["peers"] = len(list(s.info.peers_zid()))
+            except Exception:  # noqa: BLE001
+                pass
+        return d
+
+
+def wait_until(pred: Callable[[], bool], timeout: float, step: float = 0.01) -> bool:
+    """Poll ``pred`` until true or ``timeout`` seconds (tests and the demo)."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if pred():
+            return True
+        time.sleep(step)
+    return pred()

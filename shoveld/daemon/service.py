@@ -1,0 +1,336 @@
+"""The service: drivers -> store -> fixed-rate loop -> engine -> pass log -> Zenoh.
+
+Threads: one per driver (``Driver.run``, reading its transport and handing
+readings to the store), the loop thread (assemble, engine step, publish joints /
+live payload / health, watchdog), the pass-log thread (commit each finished pass,
+then publish it and its truck), and Zenoh's own. The loop thread never waits on a
+device, the disk or the network: it only reads the store, puts to Zenoh with
+congestion control DROP, and queues finished passes.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import queue
+import sys
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+from drivers.base import Driver
+from shoveld.daemon.assemble import Assembler
+from shoveld.daemon.clock import Clock, MonotonicClock
+from shoveld.daemon.config import DaemonConfig, build_driver
+from shoveld.daemon.health import LatencyStats, RateMeter, driver_health, problems
+from shoveld.daemon.loop import FixedRateLoop, LoopStats
+from shoveld.daemon.notify import Notifier
+from shoveld.daemon.persist import PassLog, db_path
+from shoveld.daemon.publisher import Publisher
+from shoveld.daemon.store import ReadingStore
+from shoveld.engine.loop import Engine, LiveEstimate, PassResult, TruckResult
+from shoveld.model.params import ModelParams
+from shoveld.payload.trucks import Truck, rule_101020
+
+log = logging.getLogger(__name__)
+
+
+def _r(x: float, nd: int) -> float | None:
+    return round(x, nd) if math.isfinite(x) else None
+
+
+class Service:
+    """One shovel's daemon. ``start()``, then ``run(stop)`` in the calling thread."""
+
+    def __init__(self, cfg: DaemonConfig, params: ModelParams, *, clock: Clock | None = None,
+                 driver_clock: Callable[[], float] | None = None,
+                 drivers: dict[str, Driver] | None = None,
+                 publisher: Publisher | None = None, notifier: Notifier | None = None,
+                 record_stats: bool = False, close_truck_at_end: bool = False) -> None:
+        self.cfg = cfg
+        self.params = params
+        self.clock: Clock = clock or MonotonicClock()
+        self.driver_clock = driver_clock or time.monotonic
+        self.close_truck_at_end = close_truck_at_end
+        self.store = ReadingStore(cfg.devices)
+        self.drivers: dict[str, Driver] = drivers if drivers is not None else {
+            name: build_driver(dev, self.driver_clock) for name, dev in cfg.devices.items()}
+        self.assembler = Assembler(cfg.devices, cfg.installation, self.store,
+                                   lambda n: self._health_of(n))
+        self.publisher = publisher or Publisher(cfg.zenoh, cfg.shovel_id, self.status)
+        self.publisher.status = self.status
+        self.notifier = notifier or Notifier()
+        self.loop_stats = LoopStats(keep_all=record_stats)
+        self.latency = LatencyStats(keep_all=record_stats)
+        self.rates = RateMeter()
+        self.loop = FixedRateLoop(self.clock, cfg.loop.rate_hz, self._tick, self.loop_stats)
+        self.passlog: PassLog | None = None
+        self.engine: Engine | None = None
+        self._stop_drivers = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self._q: queue.Queue[tuple[Any, ...] | None] = queue.Queue()
+        self._persist_thread: threading.Thread | None = None
+        self.persist_error: str | None = None
+        self.passes_written = 0
+        self.ready = False
+        self._t_start_mono = time.monotonic()
+        self._tick_no = 0
+        self._joints_every = max(1, round(cfg.loop.rate_hz / cfg.zenoh.joints_rate_hz))
+        self._live_every = max(1, round(cfg.loop.rate_hz / cfg.zenoh.live_rate_hz))
+        self._next_health = -math.inf
+        self._pending_arrivals: list[float] = []
+        self._prev_overruns = 0
+        # snapshots for the status query (replaced whole, read from Zenoh's thread)
+        self.live_msg: dict[str, Any] | None = None
+        self.truck_msg: dict[str, Any] | None = None
+        self.truck_passes: list[dict[str, Any]] = []
+        self.last_pass: dict[str, Any] | None = None
+        self.health_msg: dict[str, Any] | None = None
+        self.on_event: Callable[[str, dict[str, Any]], None] | None = None
+        """Called from the pass-log thread after a pass/truck is committed (tests, bench)."""
+
+    # -- lifecycle ---------------------------------------------------------------------------
+    def _health_of(self, name: str) -> Any:
+        d = self.drivers.get(name)
+        return d.health if d is not None else None
+
+    def start(self, zenoh_wait_s: float = 0.0) -> Service:
+        """Open the pass log and restore the truck, start Zenoh and the drivers."""
+        sys.setswitchinterval(0.001)  # let the loop thread get the GIL promptly
+        cfg = self.cfg
+        self.passlog = PassLog(db_path(cfg.state_dir), cfg.shovel_id)
+        r = self.passlog.restore()
+        self.engine = Engine(self.params, cfg.engine, first_pass=r.next_pass, first_truck=r.truck,
+                             truck_passes=r.truck_passes)
+        now = self.clock.now()
+        if r.last_dump_unix is not None:
+            elapsed = max(0.0, self.clock.wall(now) - r.last_dump_unix)
+            self.engine.last_dump_t = now - elapsed
+        self.truck_passes = [self._pass_msg_from_engine(p) for p in r.truck_passes]
+        self.truck_msg = self._truck_msg(self.engine.truck.as_dict(), False)
+        log.info("pass log %s: next pass %d, truck %d with %d passes", self.passlog.path,
+                 r.next_pass, r.truck, len(r.truck_passes))
+        self._persist_thread = threading.Thread(target=self._persist_loop, name="passlog",
+                                                daemon=True)
+        self._persist_thread.start()
+        self.publisher.start(zenoh_wait_s)
+        for name, drv in self.drivers.items():
+            th = threading.Thread(target=drv.run, args=(self.store.sink(name),
+                                                        self._stop_drivers),
+                                  name=f"driver-{name}", daemon=True)
+            th.start()
+            self._threads.append(th)
+        self._t_start_mono = time.monotonic()
+        self.notifier.status("starting: waiting for drivers")
+        return self
+
+    def drivers_up(self) -> bool:
+        return all(d.health.connected for d in self.drivers.values())
+
+    def wait_drivers(self, timeout_s: float) -> bool:
+        end = time.monotonic() + timeout_s
+        while time.monotonic() < end:
+            if self.drivers_up():
+                return True
+            time.sleep(0.01)
+        return self.drivers_up()
+
+    def run(self, stop: threading.Event, done: Callable[[], bool] | None = None,
+            max_ticks: int | None = None) -> None:
+        """Run the loop until ``stop`` is set (or ``done()``); then finish the engine if asked."""
+        self.loop.run(stop, done, max_ticks=max_ticks)
+        if self.close_truck_at_end and self.engine is not None:
+            for ev in self.engine.finish():
+                self._event(ev, self.clock.now())
+
+    def close(self) -> None:
+        """Stop drivers, drain the pass log, close Zenoh. Safe to call twice."""
+        self.notifier.stopping()
+        self._stop_drivers.set()
+        for th in self._threads:
+            th.join(timeout=5)
+        self._threads.clear()
+        if self._persist_thread is not None:
+            self._q.put(None)
+            self._persist_thread.join(timeout=30)
+            self._persist_thread = None
+        self.publisher.close()
+        if self.passlog is not None:
+            self.passlog.close()
+            self.passlog = None
+        self.notifier.close()
+
+    # -- the tick ----------------------------------------------------------------------------
+    def _tick(self, t: float) -> None:
+        engine = self.engine
+        assert engine is not None
+        s = self.assembler.sample(t)
+        self._pending_arrivals.extend(self.assembler.new_arrivals)
+        for ev in engine.step(s):
+            self._event(ev, t)
+        k = self._tick_no
+        self._tick_no += 1
+        wall = self.clock.wall(t)
+        published = False
+        if k % self._joints_every == 0:
+            bad = s.invalid
+            published |= self.publisher.put("joints", {
+                "time": round(wall, 3),
+                "swing_deg": None if "swing_deg" in bad else _r(s.swing_deg, 3),
+                "handle_deg": None if "handle_deg" in bad else _r(s.handle_deg, 3),
+                "crowd_m": None if "crowd_m" in bad else _r(s.crowd_m, 4),
+                "boom_deg": None if "boom_deg" in bad else _r(s.boom_deg, 3),
+                "invalid": sorted(bad)})
+        if k % self._live_every == 0 and self.live_msg is not None:
+            published |= self.publisher.put("payload/live", self.live_msg)
+        if published and self._pending_arrivals:
+            if not self.clock.simulated:
+                now = time.monotonic()
+                for a in self._pending_arrivals:
+                    self.latency.add(now - a)
+            self._pending_arrivals = []
+        if t >= self._next_health:
+            self._next_health = t + self.cfg.loop.health_period_s
+            self._publish_health(t)
+        if not self.ready and (self.drivers_up() or time.monotonic() - self._t_start_mono
+                               > self.cfg.loop.ready_timeout_s):
+            self.ready = True
+            up = self.drivers_up()
+            if not up:
+                log.warning("drivers not all connected after %.0f s; running degraded",
+                            self.cfg.loop.ready_timeout_s)
+            self.notifier.ready("running" if up else "running degraded: drivers not all up")
+        if self._healthy():
+            self.notifier.watchdog()
+
+    def _healthy(self) -> bool:
+        """Watchdog pings only while the loop keeps its schedule and the pass log lives."""
+        return (self.loop.behind_s < self.cfg.loop.watchdog_max_late_s
+                and self._persist_thread is not None and self._persist_thread.is_alive())
+
+    def _event(self, ev: Any, t: float) -> None:
+        wall = self.clock.wall
+        engine = self.engine
+        assert engine is not None
+        if isinstance(ev, LiveEstimate):
+            valid = bool(ev.valid and math.isfinite(ev.payload_kg))
+            self.live_msg = {"time": round(wall(ev.time_s), 3),
+                             "payload_kg": _r(ev.payload_kg, 1) if valid else None,
+                             "std_kg": _r(ev.std_kg, 1) if valid else None,
+                             "phase": ev.phase, "valid": valid, "pass": engine.pass_index,
+                             "truck": engine.truck.index}
+        elif isinstance(ev, PassResult):
+            self._q.put(("pass", ev.as_dict(), wall(ev.start_s), wall(ev.end_s)))
+        elif isinstance(ev, TruckResult):
+            self._q.put(("truck", ev.truck.as_dict(), ev.closed, wall(t)))
+            if ev.closed and engine.truck is not ev.truck:
+                self._q.put(("truck", engine.truck.as_dict(), False, wall(t)))
+
+    # -- pass log thread -------------------------------------------------------------------------
+    def _persist_loop(self) -> None:
+        while True:
+            item = self._q.get()
+            if item is None:
+                return
+            try:
+                self._persist(item)
+            except Exception as e:  # noqa: BLE001 - report, keep the thread (and watchdog) alive
+                self.persist_error = f"{type(e).__name__}: {e}"
+                log.exception("pass log: %s", e)
+
+    def _persist(self, item: tuple[Any, ...]) -> None:
+        assert self.passlog is not None
+        target = self.cfg.engine.truck_target_kg
+        if item[0] == "pass":
+            _, p, start_u, end_u = item
+            for attempt in range(5):
+                try:
+                    self.passlog.write_pass(p, start_u, end_u, target)
+                    break
+                except Exception as e:  # noqa: BLE001 - disk full, I/O error: retry, then say so
+                    self.persist_error = f"writing pass {p['pass']}: {e}"
+                    log.error("pass log: %s (attempt %d)", self.persist_error, attempt + 1)
+                    time.sleep(0.2 * (attempt + 1))
+            else:
+                return  # not durable: not published either
+            self.persist_error = None
+            self.passes_written += 1
+            msg = self._pass_msg(p, start_u, end_u)
+            self.last_pass = msg
+            if self.truck_msg is None or self.truck_msg.get("truck") != p["truck"]:
+                self.truck_passes = []
+            self.truck_passes = [*self.truck_passes, msg]
+            log.info("pass %d (truck %d): %s", p["pass"], p["truck"],
+                     f"{p['payload_kg']:.0f} kg +- {p['std_kg']:.0f} kg" if p["valid"]
+                     else f"INVALID ({p['reason']})")
+            self.publisher.put("pass", msg)
+            if self.on_event:
+                self.on_event("pass", msg)
+        else:
+            _, tdict, closed, wall_t = item
+            if closed:
+                self.passlog.close_truck(tdict["truck"], target, wall_t)
+            msg = self._truck_msg(tdict, closed)
+            if not closed:
+                if self.truck_msg is None or self.truck_msg.get("truck") != tdict["truck"]:
+                    self.truck_passes = []
+                self.truck_msg = msg
+            else:
+                log.info("truck %d closed: %d passes, %.0f kg (%s)", tdict["truck"],
+                         tdict["passes"], tdict["total_kg"], tdict["status"])
+            self.publisher.put("truck", msg)
+            if self.on_event:
+                self.on_event("truck", msg)
+
+    @staticmethod
+    def _pass_msg(p: dict[str, Any], start_u: float, end_u: float) -> dict[str, Any]:
+        return {"pass": p["pass"], "truck": p["truck"], "payload_kg": p["payload_kg"],
+                "std_kg": p["std_kg"], "start": round(start_u, 3), "end": round(end_u, 3),
+                "valid": bool(p["valid"]), "samples": p["samples"], "reason": p["reason"]}
+
+    @staticmethod
+    def _pass_msg_from_engine(p: dict[str, Any]) -> dict[str, Any]:
+        return {"pass": p["pass"], "truck": p["truck"], "payload_kg": p["payload_kg"],
+                "std_kg": p["std_kg"], "valid": bool(p["valid"]), "samples": p["samples"],
+                "reason": p.get("reason", "")}
+
+    def _truck_msg(self, tdict: dict[str, Any], closed: bool) -> dict[str, Any]:
+        msg = {k: tdict[k] for k in ("truck", "passes", "total_kg", "std_kg", "target_kg",
+                                     "fill_pct", "status", "invalid_passes")}
+        msg["closed"] = closed
+        if self.passlog is not None:
+            since = self.clock.wall(self.clock.now()) - 3600.0 * self.cfg.rule_window_h
+            trucks = [Truck(i, target, [{"payload_kg": total, "std_kg": 0.0}])
+                      for i, total, target in self.passlog.closed_truck_totals(since)]
+            msg["rule_10_10_20"] = {"window_h": self.cfg.rule_window_h, **rule_101020(trucks)}
+        return msg
+
+    # -- health and status -----------------------------------------------------------------------
+    def _publish_health(self, t: float) -> None:
+        drivers = {name: driver_health(name, self.drivers.get(name), self.assembler.state[name],
+                                       self.store, self.rates, t)
+                   for name in self.cfg.devices}
+        loop = self.loop_stats.as_dict(self.cfg.loop.rate_hz, self.clock.simulated)
+        loop["overruns_recent"] = self.loop_stats.overruns - self._prev_overruns
+        self._prev_overruns = self.loop_stats.overruns
+        loop["publish_latency_ms"] = self.latency.as_dict()
+        zen = self.publisher.health()
+        persist = {"passes_written": self.passes_written, "queue": self._q.qsize(),
+                   "last_error": self.persist_error}
+        msg = {"time": round(self.clock.wall(t), 3), "ready": self.ready,
+               "drivers": drivers, "loop": loop, "zenoh": zen, "pass_log": persist,
+               "watchdog": {"enabled": self.notifier.watchdog_s is not None,
+                            "pings": self.notifier.pings}}
+        msg["problems"] = problems(drivers, loop, zen, persist)
+        msg["ok"] = not msg["problems"]
+        self.health_msg = msg
+        self.publisher.put("health", msg)
+
+    def status(self) -> dict[str, Any]:
+        """The answer to ``<prefix>/<id>/status``: everything a display needs to start."""
+        h = self.health_msg or {}
+        return {"shovel": self.cfg.shovel_id, "time": round(time.time(), 3),
+                "ready": self.ready, "live": self.live_msg, "truck": self.truck_msg,
+                "truck_passes": self.truck_passes, "last_pass": self.last_pass,
+                "ok": h.get("ok"), "problems": h.get("problems"), "health": h or None}

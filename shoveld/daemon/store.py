@@ -1,0 +1,73 @@
+"""The shared store between driver threads and the loop: the freshest readings per device.
+
+Driver threads only append (through :meth:`ReadingStore.sink`); the loop asks, at
+each tick, for the readings that bracket the tick time. Each device keeps a few
+recent readings so a reading that lands a moment after the tick's deadline can be
+interpolated with the one before instead of being used as if it were on time.
+Nothing here waits on a device: a silent device simply has old readings.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+
+from drivers.base import Reading
+
+
+@dataclass(slots=True)
+class Stored:
+    """A reading plus when it reached the store (host monotonic, for latency figures)."""
+
+    reading: Reading
+    arrived: float
+    seq: int
+
+
+class ReadingStore:
+    """Recent readings per device; thread-safe, never blocks for long."""
+
+    def __init__(self, devices: Iterable[str], depth: int = 8) -> None:
+        self._lock = threading.Lock()
+        self._recent: dict[str, deque[Stored]] = {d: deque(maxlen=depth) for d in devices}
+        self._count: dict[str, int] = dict.fromkeys(self._recent, 0)
+
+    @property
+    def devices(self) -> list[str]:
+        return list(self._recent)
+
+    def sink(self, device: str) -> Callable[[Reading], None]:
+        """The callback a driver thread hands its readings to."""
+        if device not in self._recent:
+            raise KeyError(device)
+
+        def put(r: Reading) -> None:
+            self.put(device, r)
+        return put
+
+    def put(self, device: str, r: Reading) -> None:
+        arrived = time.monotonic()
+        with self._lock:
+            n = self._count[device] + 1
+            self._count[device] = n
+            self._recent[device].append(Stored(r, arrived, n))
+
+    def bracket(self, device: str, t: float) -> tuple[Stored | None, Stored | None]:
+        """(latest reading at or before ``t``, earliest reading after ``t``)."""
+        with self._lock:
+            recent = list(self._recent[device])
+        before: Stored | None = None
+        after: Stored | None = None
+        for s in reversed(recent):
+            if s.reading.t_host <= t:
+                before = s
+                break
+            after = s
+        return before, after
+
+    def count(self, device: str) -> int:
+        """Readings received from ``device`` since start (for its sample rate)."""
+        return self._count[device]
