@@ -93,10 +93,16 @@ class XbusMessage(NamedTuple):
     data: bytes
 
 
-def encode_frame(mid: int, data: bytes = b"", bid: int = BID_MASTER) -> bytes:
-    """Build a complete Xbus frame, using the extended length form for >= 255 data bytes."""
+def encode_frame(mid: int, data: bytes = b"", bid: int = BID_MASTER,
+                 extended: bool | None = None) -> bytes:
+    """Build a complete Xbus frame; the extended length form is used for >= 255 data bytes
+    (or always/never with ``extended=True/False``; the parser accepts both forms)."""
     n = len(data)
-    if n < EXTENDED_LENGTH:
+    if extended is None:
+        extended = n >= EXTENDED_LENGTH
+    if not extended:
+        if n >= EXTENDED_LENGTH:
+            raise ValueError(f"{n} data bytes need the extended length form")
         head = bytes((bid, mid & 0xFF, n))
     elif n <= 0xFFFF:
         head = bytes((bid, mid & 0xFF, EXTENDED_LENGTH, n >> 8, n & 0xFF))
