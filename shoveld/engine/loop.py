@@ -41,6 +41,9 @@ class EngineConfig:
     """The joint filters' start-up transient: no phase changes before it has passed."""
     window_s: float = 0.5
     """Zero-phase window of the payload equations (identification uses the same)."""
+    batch: int = 10
+    """Samples per payload-filter update (one model evaluation and one filterpy update
+    per block; the live payload moves in steps of this many ticks)."""
     settle_s: float = 0.4
     """Samples this soon after leaving the bank are not used (bank contact fades)."""
     min_samples: int = 40
@@ -94,10 +97,6 @@ class TruckResult:
 Event = LiveEstimate | PassResult | TruckResult
 
 
-def _arr(x: float) -> np.ndarray:
-    return np.array([x])
-
-
 class Engine:
     """Causal payload pipeline for one shovel."""
 
@@ -113,6 +112,8 @@ class Engine:
         self.f_th = JointFilter(HANDLE, dt)
         self.f_d = JointFilter(CROWD, dt)
         self.f_sw = JointFilter(SWING, dt)
+        self.batch: list[tuple[float, ...]] = []
+        self.uses_field = any(getattr(t, "uses_field_current", False) for t in self.model.terms)
         self.lagged: FixedLagSavgol[tuple[Sample, bool, int]] = FixedLagSavgol(
             self.cfg.window_s, dt, 3)
         self.phases = PhaseMachine(self.cfg.phases)
@@ -161,6 +162,8 @@ class Engine:
                 valid = self._update(s_lag, *kin[0], *kin[1], *kin[2])
         elif ph in ESTIMATING:
             self.invalid_updates += 1
+        if self.batch and ph not in ESTIMATING:
+            self._flush()
         if self.rls is not None and self.rls.n:
             est = LiveEstimate(t, PHASES[ph], self.rls.payload_kg, self._std(),
                                valid or ph not in ESTIMATING)
@@ -193,10 +196,12 @@ class Engine:
             self.pass_index += 1
             self.pass_start = t
             self.rls = PayloadRls(self.noise, self.dt, self.cfg.rls)
+            self.batch.clear()
             self.invalid_updates = 0
         elif prev == DIG:
             self.dig_end = t
         if ph == DUMP and self.rls is not None:
+            self._flush()
             out.extend(self._finish_pass(t))
         if ph == IDLE and prev != IDLE and self.rls is not None and prev in ESTIMATING:
             self.rls = None  # the cycle was abandoned before a dump
@@ -217,29 +222,40 @@ class Engine:
 
     def _update(self, s: Sample, th: float, d: float, sw: float, thd: float, dd: float,
                 swd: float, thdd: float, ddd: float, swdd: float) -> bool:
+        """Queue one sample for the payload filter if its inputs are valid."""
         i_h = s.hoist1_a + s.hoist2_a
         if (any(n in s.invalid for n in NEEDED) or math.isnan(i_h) or math.isnan(s.crowd_a)
                 or math.isnan(th) or math.isnan(d)):
             self.invalid_updates += 1
             return False
-        if not any(getattr(t, "uses_field_current", False) for t in self.model.terms) and (
+        if not self.uses_field and (
                 s.hoist_field_a < self.cfg.weak_field_fraction * self.cfg.hoist_field_nominal_a):
             return False
-        boom = math.radians(s.boom_deg) if not math.isnan(s.boom_deg) else math.radians(45.0)
-        k = Kinematics(t=_arr(s.time_s), th=_arr(th), thd=_arr(thd), thdd=_arr(thdd),
-                       d=_arr(d), dd=_arr(dd), ddd=_arr(ddd), boom=_arr(boom), i_h=_arr(i_h),
-                       i_c=_arr(s.crowd_a), i_hf=_arr(s.hoist_field_a), swing=_arr(sw),
-                       swing_rate=_arr(swd), swing_acc=_arr(swdd),
-                       roll=_arr(math.radians(np.nan_to_num(s.roll_deg))),
-                       pitch=_arr(math.radians(np.nan_to_num(s.pitch_deg))))
-        w, phi, psi = self.model.regressor(k)
-        a = phi[0] + psi[0] @ self.p
-        b = -(w[0] @ self.p)
-        assert self.rls is not None
-        m = self.rls.payload_kg if self.rls.n else 0.0
-        self.rls.update((float(a[0]), float(a[1])), (float(b[0]), float(b[1])),
-                        -(w[0] + m * psi[0]))
+        boom = s.boom_deg if not math.isnan(s.boom_deg) else 45.0
+        roll = 0.0 if math.isnan(s.roll_deg) else s.roll_deg
+        pitch = 0.0 if math.isnan(s.pitch_deg) else s.pitch_deg
+        self.batch.append((s.time_s, th, thd, thdd, d, dd, ddd, boom, i_h, s.crowd_a,
+                           s.hoist_field_a, sw, swd, swdd, roll, pitch))
+        if len(self.batch) >= self.cfg.batch:
+            self._flush()
         return True
+
+    def _flush(self) -> None:
+        """Evaluate the model once for the queued samples and update the filter."""
+        if not self.batch or self.rls is None:
+            self.batch.clear()
+            return
+        c = np.array(self.batch).T
+        self.batch.clear()
+        k = Kinematics(t=c[0], th=c[1], thd=c[2], thdd=c[3], d=c[4], dd=c[5], ddd=c[6],
+                       boom=np.radians(c[7]), i_h=c[8], i_c=c[9], i_hf=c[10], swing=c[11],
+                       swing_rate=c[12], swing_acc=c[13], roll=np.radians(c[14]),
+                       pitch=np.radians(c[15]))
+        w, phi, psi = self.model.regressor(k)
+        a = phi + psi @ self.p
+        b = -(w @ self.p)
+        m = self.rls.payload_kg if self.rls.n else 0.0
+        self.rls.update(a, b, -(w + m * psi))
 
     def _std(self) -> float:
         """Total payload std: the pass's own noise and the calibration's uncertainty."""

@@ -30,7 +30,11 @@ class FixedLagSavgol(Generic[T]):
         # Coefficients for the centre point: value, first and second derivative.
         self.coeffs = np.stack([savgol_coeffs(self.window, 3, deriv=k, delta=dt, use="dot")
                                 for k in range(3)])
-        self.buf: deque[np.ndarray] = deque(maxlen=self.window)
+        # A doubled ring: every sample is written twice, so the window is always one
+        # contiguous slice and the fit is a single small matrix product.
+        self._ring = np.zeros((2 * self.window, n_signals))
+        self._pos = 0
+        self._count = 0
         self.tags: deque[T] = deque(maxlen=self.window)
         self.n = n_signals
         self.dt = dt
@@ -40,15 +44,19 @@ class FixedLagSavgol(Generic[T]):
              ) -> tuple[T, np.ndarray] | None:
         """Add a sample; once the window is full, return the centre sample's tag and a
         (3, n_signals) array of value, rate and acceleration. NaN or a time gap restarts."""
-        if any(math.isnan(v) for v in values) or (
-                not math.isnan(self._last_t) and t - self._last_t > 1.5 * self.dt):
-            self.buf.clear()
+        missing = any(math.isnan(v) for v in values)
+        if missing or (not math.isnan(self._last_t) and t - self._last_t > 1.5 * self.dt):
+            self._count = 0
             self.tags.clear()
         self._last_t = t
-        if any(math.isnan(v) for v in values):
+        if missing:
             return None
-        self.buf.append(np.asarray(values, dtype=float))
+        w, pos = self.window, self._pos
+        self._ring[pos] = values
+        self._ring[pos + w] = values
+        self._pos = (pos + 1) % w
+        self._count += 1
         self.tags.append(tag)
-        if len(self.buf) < self.window:
+        if self._count < w:
             return None
-        return self.tags[self.half], self.coeffs @ np.stack(self.buf)
+        return self.tags[self.half], self.coeffs @ self._ring[self._pos:self._pos + w]

@@ -77,7 +77,11 @@ class Term:
 
 def _stack(*eqs: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
     """Columns given as (th_eq, d_eq) pairs -> (N, 2, P)."""
-    return np.stack([np.stack(pair, axis=-1) for pair in eqs], axis=-1)
+    out = np.empty((len(eqs[0][0]), 2, len(eqs)))
+    for j, (th_eq, d_eq) in enumerate(eqs):
+        out[:, 0, j] = th_eq
+        out[:, 1, j] = d_eq
+    return out
 
 
 def payload_phi(k: Kinematics) -> np.ndarray:

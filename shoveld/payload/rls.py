@@ -32,48 +32,56 @@ class PayloadRls:
     def __init__(self, noise: tuple[float, float], dt: float, cfg: RlsConfig | None = None
                  ) -> None:
         self.cfg = cfg or RlsConfig()
+        self.dt = dt
+        self.r_diag = np.square(np.asarray(noise, dtype=float))
         kf = KalmanFilter(dim_x=1, dim_z=2)
         kf.F = np.eye(1)
-        kf.Q = np.array([[(self.cfg.forgetting_std_kg_per_s**2) * dt]])
-        kf.R = np.diag(np.square(noise))
         kf.x = np.array([[self.cfg.prior_kg]])
         kf.P = np.array([[self.cfg.prior_std_kg**2]])
         self.kf = kf
-        self._h = np.zeros((2, 1))
-        self._z = np.zeros((2, 1))
         self.n = 0
         self._nis_sum = 0.0
+        self._nis_dof = 0
         self._prev_nu: np.ndarray | None = None
         self._corr_num = 0.0
         self._corr_den = 0.0
         self._s_aa = 0.0
         self._s_adb: np.ndarray | None = None
 
-    def update(self, a: tuple[float, float], b: tuple[float, float],
-               db_dp: np.ndarray | None = None) -> None:
-        """One sample: a * m = b for the handle and crowd equations.
+    def update(self, a: np.ndarray, b: np.ndarray, db_dp: np.ndarray | None = None) -> None:
+        """A block of samples: ``a[k] * m = b[k]`` for the handle and crowd equations.
 
-        ``db_dp`` (2, P), the sensitivity of the equations to the model parameters,
-        lets :meth:`param_std_kg` carry the calibration's uncertainty into the pass.
+        ``a``, ``b`` are (N, 2). One filterpy update with the stacked measurement is the
+        same as N sequential updates when there is no forgetting, and N times cheaper.
+        ``db_dp`` (N, 2, P), the sensitivity of ``b`` to the model parameters, lets
+        :meth:`param_std_kg` carry the calibration's uncertainty into the pass.
         """
-        if db_dp is not None:
-            r_inv = 1.0 / np.diag(self.kf.R)
-            wa = np.asarray(a) * r_inv
-            self._s_aa += float(wa @ np.asarray(a))
-            self._s_adb = self._s_adb + wa @ db_dp if self._s_adb is not None else wa @ db_dp
-        h, z = self._h, self._z
-        h[0, 0], h[1, 0] = a
-        z[0, 0], z[1, 0] = b
+        a = np.asarray(a, dtype=float).reshape(-1, 2)
+        b = np.asarray(b, dtype=float).reshape(-1, 2)
+        n = len(a)
+        if n == 0:
+            return
         kf = self.kf
+        kf.Q = np.array([[(self.cfg.forgetting_std_kg_per_s**2) * self.dt * n]])
         kf.predict()
-        kf.update(z, H=h)
-        nu = kf.y[:, 0] / np.sqrt(np.diag(kf.R))
+        kf.update(b.reshape(-1, 1), R=np.diag(np.tile(self.r_diag, n)), H=a.reshape(-1, 1))
         self._nis_sum += float((kf.y.T @ kf.SI @ kf.y)[0, 0])
+        self._nis_dof += 2 * n
+        nu = (kf.y[:, 0].reshape(n, 2) / np.sqrt(self.r_diag))
         if self._prev_nu is not None:
-            self._corr_num += float(nu @ self._prev_nu)
-            self._corr_den += float(nu @ nu)
-        self._prev_nu = nu
-        self.n += 1
+            nu_prev = np.vstack([self._prev_nu[None, :], nu[:-1]])
+        else:
+            nu_prev = nu[:-1]
+            nu = nu[1:] if n > 1 else nu[:0]
+        self._corr_num += float(np.sum(nu * nu_prev))
+        self._corr_den += float(np.sum(nu * nu))
+        self._prev_nu = kf.y[-2:, 0] / np.sqrt(self.r_diag)
+        if db_dp is not None:
+            wa = a / self.r_diag
+            self._s_aa += float(np.sum(wa * a))
+            s = np.einsum("ke,kep->p", wa, np.asarray(db_dp))
+            self._s_adb = s if self._s_adb is None else self._s_adb + s
+        self.n += n
 
     @property
     def payload_kg(self) -> float:
@@ -92,7 +100,7 @@ class PayloadRls:
         """Filter standard deviation, inflated by the innovations' size and correlation."""
         if not self.n:
             return math.nan
-        scale = max(1.0, self._nis_sum / (2.0 * self.n))
+        scale = max(1.0, self._nis_sum / max(1, self._nis_dof))
         rho = self._corr_num / self._corr_den if self._corr_den > 0 else 0.0
         rho = min(max(rho, 0.0), 0.98)
         return math.sqrt(float(self.kf.P[0, 0]) * scale * (1 + rho) / (1 - rho))
