@@ -39,6 +39,9 @@ class EngineConfig:
     """A pause this long without digging means the truck was exchanged."""
     warmup_s: float = 1.0
     """The joint filters' start-up transient: no phase changes before it has passed."""
+    payload_rates: str = "fixed_lag"
+    """'fixed_lag' (zero-phase, half a window late) or 'kalman' (causal, biased by lag);
+    kept for bench/kinematics_tradeoff.py, which measures the difference."""
     window_s: float = 0.5
     """Zero-phase window of the payload equations (identification uses the same)."""
     batch: int = 10
@@ -156,7 +159,10 @@ class Engine:
                                    math.radians(s.swing_deg) if "swing_deg" not in bad
                                    and not math.isnan(s.swing_deg) else 0.0),
                                (s, settled, self.pass_index))
-        if out is not None:
+        if self.cfg.payload_rates == "kalman":
+            if settled and self.rls is not None:
+                valid = self._update(s, th, d, sw, thd, dd, swd, thdd, ddd, swdd)
+        elif out is not None:
             (s_lag, settled_lag, pass_lag), kin = out
             if settled_lag and pass_lag == self.pass_index and self.rls is not None:
                 valid = self._update(s_lag, *kin[0], *kin[1], *kin[2])
