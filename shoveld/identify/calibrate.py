@@ -120,16 +120,21 @@ class StageResult:
     residual_rms: dict[str, float]
 
 
-def _solve(a: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, float]:
-    """Least squares with column scaling; returns p, (A^T A)^-1, cond, tau."""
+def _solve(a: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Least squares with column scaling; returns p and (A^T A)^-1."""
     scale = np.linalg.norm(a, axis=0)
     scale[scale == 0] = 1.0
     an = a / scale
     p_n, *_ = np.linalg.lstsq(an, y, rcond=None)
-    sv = np.linalg.svd(an, compute_uv=False)
-    cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf
     inv = np.linalg.pinv(an.T @ an)
-    return p_n / scale, inv / np.outer(scale, scale), cond, 1.0
+    return p_n / scale, inv / np.outer(scale, scale)
+
+
+def condition_number(a: np.ndarray) -> float:
+    """Of the column-normalised regressor: how well the data separate the parameters."""
+    norms = np.linalg.norm(a, axis=0)
+    sv = np.linalg.svd(a / np.where(norms > 0, norms, 1.0), compute_uv=False)
+    return float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf
 
 
 REFERENCE_PARAM = "K_H"
@@ -152,7 +157,7 @@ def _solve_normalized(wn: np.ndarray, yn: np.ndarray, ref: int
     others = [j for j in range(wn.shape[2]) if j != ref]
     a = np.concatenate([wn[:, :, others], -yn[:, :, None]], axis=2).reshape(-1, len(others) + 1)
     b = -w_ref.reshape(-1)
-    theta, inv, _, _ = _solve(a, b)
+    theta, inv = _solve(a, b)
     r_theta = (a @ theta - b).reshape(-1, n_eq)
     s2 = float(np.sum(r_theta**2)) / max(1, a.shape[0] - len(theta))
     tau = max(integrated_autocorrelation(r_theta[:, 0]), integrated_autocorrelation(r_theta[:, 1]))
@@ -186,8 +191,7 @@ class Calibrator:
     def prepare(self, tables: list[SignalsTable]) -> list[FileData]:
         return [exclusion_masks(t, self.model, self.exclusion, self.window_s) for t in tables]
 
-    def _rows(self, files: list[FileData], which: str
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _rows(self, files: list[FileData], which: str) -> tuple[np.ndarray, np.ndarray]:
         """Stacked (W + m Psi), y = -m phi, and the equation index, for chosen samples."""
         ws, ys = [], []
         for f in files:
@@ -213,13 +217,13 @@ class Calibrator:
             ws.append(w)
             ys.append(y)
         if not ws:
-            return np.zeros((0, 2, len(self.model.param_names))), np.zeros((0, 2)), np.zeros(0)
-        return np.concatenate(ws), np.concatenate(ys), np.zeros(0)
+            return np.zeros((0, 2, len(self.model.param_names))), np.zeros((0, 2))
+        return np.concatenate(ws), np.concatenate(ys)
 
     def fit(self, tables: list[SignalsTable]) -> Calibrator:
         self.files_ = self.prepare(tables)
         names = self.model.param_names
-        w_all, y_all, _ = self._rows(self.files_, "all")
+        w_all, y_all = self._rows(self.files_, "all")
         if len(w_all) < 10:
             raise ValueError("fewer than 10 usable samples after exclusions: "
                              + "; ".join(f"{f.name}: {dict(f.excluded)}" for f in self.files_))
@@ -236,32 +240,28 @@ class Calibrator:
             self.stages_ = []
             cov = np.zeros((len(names), len(names)))
             if self.method == "staged":
-                w_s, y_s, _ = self._rows(self.files_, "static")
+                w_s, y_s = self._rows(self.files_, "static")
                 si = [names.index(n) for n in static_names]
                 di = [i for i in range(len(names)) if i not in si]
                 if len(w_s) < 4 * len(si):
                     raise ValueError(f"only {len(w_s)} static samples: the staged method needs "
                                      "static poses (or use method='joint')")
-                p_s, cov_s = self._stage("static (gravity)", w_s, y_s, si, sigma, None)
+                p_s, cov_s = self._stage("static (gravity)", w_s, y_s, si, sigma)
                 p[si] = p_s
                 cov[np.ix_(si, si)] = cov_s
-                w_d, y_d, _ = self._rows(self.files_, "dynamic")
+                w_d, y_d = self._rows(self.files_, "dynamic")
                 y_d = y_d - w_d[:, :, si] @ p_s
-                p_d, cov_d = self._stage("dynamic", w_d, y_d, di, sigma, None)
+                p_d, cov_d = self._stage("dynamic", w_d, y_d, di, sigma)
                 p[di] = p_d
                 cov[np.ix_(di, di)] = cov_d
             elif self.method == "joint":
                 idx = list(range(len(names)))
-                p, cov = self._stage("joint", w_all, y_all, idx, sigma, None)
+                p, cov = self._stage("joint", w_all, y_all, idx, sigma)
             else:
                 raise ValueError(f"unknown method {self.method!r}; use 'staged' or 'joint'")
             res = (w_all @ p) - y_all
             sigma = np.sqrt(np.mean(res**2, axis=0))
-        w_all_n = w_all / sigma[None, :, None]
-        a = w_all_n.reshape(-1, len(names))
-        an = a / np.where(np.linalg.norm(a, axis=0) > 0, np.linalg.norm(a, axis=0), 1.0)
-        sv = np.linalg.svd(an, compute_uv=False)
-        cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf
+        cond = condition_number((w_all / sigma[None, :, None]).reshape(-1, len(names)))
         hyper = {t.name: dict(t.hyper) for t in self.model.terms if t.hyper}
         excluded: dict[str, Any] = {}
         for f in self.files_:
@@ -284,7 +284,7 @@ class Calibrator:
         return self
 
     def _stage(self, name: str, w: np.ndarray, y: np.ndarray, idx: list[int],
-               sigma: np.ndarray, _: Any) -> tuple[np.ndarray, np.ndarray]:
+               sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         names = self.model.param_names
         wn = w[:, :, idx] / sigma[None, :, None]
         yn = y / sigma[None, :]
@@ -294,15 +294,12 @@ class Calibrator:
         else:
             a = wn.reshape(-1, len(idx))
             b = yn.reshape(-1)
-            p, inv, _, _ = _solve(a, b)
+            p, inv = _solve(a, b)
             r = (a @ p - b).reshape(-1, 2)
             s2 = float(np.sum(r**2)) / max(1, a.shape[0] - len(idx))
             tau = max(integrated_autocorrelation(r[:, 0]), integrated_autocorrelation(r[:, 1]))
             cov = inv * s2 * tau
-        a = wn.reshape(-1, len(idx))
-        an = a / np.where(np.linalg.norm(a, axis=0) > 0, np.linalg.norm(a, axis=0), 1.0)
-        sv = np.linalg.svd(an, compute_uv=False)
-        cond = float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf
+        cond = condition_number(wn.reshape(-1, len(idx)))
         rms = np.sqrt(np.mean(r**2, axis=0)) * sigma
         self.stages_.append(StageResult(name, [self.model.param_names[i] for i in idx],
                                         int(w.shape[0]), cond,
