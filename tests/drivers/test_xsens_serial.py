@@ -321,3 +321,42 @@ def test_from_config_accepts_a_full_config() -> None:
         "backoff_s": [0.5, 10]})
     assert drv.name == "arm" and drv.backoff_s == (0.5, 10.0)
     assert (XDI.QUATERNION | 0x8 | 0x1, 50) in drv.requested_outputs()
+
+
+def test_pty_pair_is_binary_clean_and_shows_the_baud_rate() -> None:
+    import os
+    import termios
+
+    import serial
+
+    from hil_fixtures.pty import pty_pair
+
+    with pty_pair() as (master, slave_path):
+        os.write(master, b"\xfa\r\n before the port opens: not echoed back to the master")
+        ser = serial.Serial(slave_path, 921600, timeout=0.2)  # pyserial flushes input
+        try:
+            os.write(master, b"\xfa\r\n\x00")
+            assert ser.read(4) == b"\xfa\r\n\x00"  # no CR/LF translation
+            ser.write(bytes(range(256)))
+            ser.flush()
+            got = b""
+            while len(got) < 256:
+                got += os.read(master, 512)
+            assert got == bytes(range(256))  # and nothing echoed back into the stream
+            assert termios.tcgetattr(master)[5] == termios.B921600
+        finally:
+            ser.close()
+
+
+def test_angles_from_signals_loops_holds_and_skips_unknown_rows() -> None:
+    t = np.array([0.0, 1.0, 2.0, 3.0])
+    table = SignalsTable.from_arrays(time_s=t + 100.0, handle_deg=[0.0, 10.0, np.nan, 30.0],
+                                     swing_deg=[170.0, 190.0, 0.0, 210.0])
+    looped = angles_from_signals(table)
+    assert looped(0.5) == pytest.approx((0.0, 5.0, -180.0))  # swing 180 wraps to -180
+    assert looped(2.0) == pytest.approx((0.0, 20.0, -160.0))  # the blank row is skipped
+    assert looped(3.5) == pytest.approx(looped(0.5))
+    held = angles_from_signals(table, loop=False)
+    assert held(10.0) == pytest.approx((0.0, 30.0, -150.0))
+    with pytest.raises(ValueError, match="need two rows"):
+        angles_from_signals(SignalsTable.from_arrays(time_s=[0.0, 1.0], handle_deg=[1.0, 2.0]))
