@@ -233,8 +233,10 @@ def device_signals(kind: str, driver: Mapping[str, Any]) -> tuple[str, ...]:
     return tuple(c["name"] for c in chans if isinstance(c, Mapping) and "name" in c)
 
 
-def build_driver(dev: DeviceConfig, clock: Any = None) -> Any:
-    """The driver object of one device (not opened): the drivers' own constructors."""
+def build_driver(dev: DeviceConfig, clock: Any = None, **kw: Any) -> Any:
+    """The driver object of one device (not opened): the drivers' own constructors.
+
+    ``kw`` goes to serial/CAN drivers (``serial_factory``, ``bus_factory``)."""
     import time as _time
 
     clk = clock if clock is not None else _time.monotonic
@@ -242,19 +244,19 @@ def build_driver(dev: DeviceConfig, clock: Any = None) -> Any:
     if dev.kind == "ar4000":
         from drivers.acuity.ar4000 import Ar4000Driver
 
-        return Ar4000Driver.from_config(dev.name, d, clock=clk)
+        return Ar4000Driver.from_config(dev.name, d, clock=clk, **kw)
     if dev.kind == "mti_serial":
         from drivers.xsens.serial_driver import MtiSerialDriver
 
         d.pop("kind", None)
         d.setdefault("name", dev.name)
-        return MtiSerialDriver.from_config(d, clock=clk)
+        return MtiSerialDriver.from_config(d, clock=clk, **kw)
     if dev.kind == "mti_can":
         from drivers.xsens.can_driver import MtiCanDriver
 
         d.pop("kind", None)
         d.setdefault("name", dev.name)
-        return MtiCanDriver.from_config(d, clock=clk)
+        return MtiCanDriver.from_config(d, clock=clk, **kw)
     from drivers.modbus_adc.driver import ModbusAdcDriver
 
     return ModbusAdcDriver.from_config(dev.name, d, clock=clk)

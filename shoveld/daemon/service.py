@@ -47,12 +47,17 @@ class Service:
                  driver_clock: Callable[[], float] | None = None,
                  drivers: dict[str, Driver] | None = None,
                  publisher: Publisher | None = None, notifier: Notifier | None = None,
-                 record_stats: bool = False, close_truck_at_end: bool = False) -> None:
+                 record_stats: bool = False, close_truck_at_end: bool = False,
+                 driver_threads: bool = True,
+                 before_tick: Callable[[float], None] | None = None) -> None:
         self.cfg = cfg
         self.params = params
         self.clock: Clock = clock or MonotonicClock()
         self.driver_clock = driver_clock or time.monotonic
         self.close_truck_at_end = close_truck_at_end
+        self.driver_threads = driver_threads
+        self.before_tick = before_tick
+        """Called with the tick time before assembly (fast replay steps its drivers here)."""
         self.store = ReadingStore(cfg.devices)
         self.drivers: dict[str, Driver] = drivers if drivers is not None else {
             name: build_driver(dev, self.driver_clock) for name, dev in cfg.devices.items()}
@@ -116,6 +121,8 @@ class Service:
         self._persist_thread.start()
         self.publisher.start(zenoh_wait_s)
         for name, drv in self.drivers.items():
+            if not self.driver_threads:
+                break
             th = threading.Thread(target=drv.run, args=(self.store.sink(name),
                                                         self._stop_drivers),
                                   name=f"driver-{name}", daemon=True)
@@ -165,6 +172,8 @@ class Service:
     def _tick(self, t: float) -> None:
         engine = self.engine
         assert engine is not None
+        if self.before_tick is not None:
+            self.before_tick(t)
         s = self.assembler.sample(t)
         self._pending_arrivals.extend(self.assembler.new_arrivals)
         for ev in engine.step(s):
@@ -232,12 +241,22 @@ class Service:
         while True:
             item = self._q.get()
             if item is None:
+                self._q.task_done()
                 return
             try:
                 self._persist(item)
             except Exception as e:  # noqa: BLE001 - report, keep the thread (and watchdog) alive
                 self.persist_error = f"{type(e).__name__}: {e}"
                 log.exception("pass log: %s", e)
+            finally:
+                self._q.task_done()
+
+    def flush(self, timeout_s: float = 30.0) -> bool:
+        """Wait until every queued pass/truck is committed and published."""
+        end = time.monotonic() + timeout_s
+        while self._q.unfinished_tasks and time.monotonic() < end:
+            time.sleep(0.005)
+        return not self._q.unfinished_tasks
 
     def _persist(self, item: tuple[Any, ...]) -> None:
         assert self.passlog is not None

@@ -1,0 +1,296 @@
+"""``shoveld cab``: the operator's view in a terminal, from Zenoh.
+
+Subscribes to a shovel's ``payload/live``, ``pass``, ``truck`` and ``health`` topics,
+asks ``status`` once at start (so a display switched on mid-truck shows the passes
+already loaded), and watches the daemon's liveliness token. On a terminal it redraws
+one screen with plain ANSI codes; when stdout is not a terminal (a log, a pipe) it
+prints one line per event instead.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any, TextIO
+
+from shoveld.cli import CliError
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "cab", help="cab display: live payload, passes of the truck, truck total",
+        description="A Zenoh subscriber for the cab: live payload, the passes of the current "
+                    "truck and the truck total against target. Connects to the daemon on "
+                    "this machine by default.")
+    p.add_argument("--connect", action="append", default=None, metavar="ENDPOINT",
+                   help="Zenoh endpoint to connect to (repeatable; default "
+                        "tcp/127.0.0.1:7447)")
+    p.add_argument("--mode", choices=("client", "peer"), default="client")
+    p.add_argument("--shovel", default="*", help="shovel id to show (default: all)")
+    p.add_argument("--prefix", default="shovel", help="key prefix (zenoh.prefix)")
+    p.add_argument("--duration", type=float, default=None, help="exit after this many seconds")
+    p.add_argument("--lines", action="store_true",
+                   help="print one line per event even on a terminal")
+    p.add_argument("--until-closed-trucks", type=int, default=None, metavar="N",
+                   help="exit after N trucks were closed (demo, tests)")
+    p.set_defaults(func=run)
+
+
+def _kg(x: Any) -> str:
+    return "     --" if x is None else f"{x:7.0f}"
+
+
+@dataclass
+class ShovelView:
+    """What the cab knows about one shovel."""
+
+    shovel: str
+    alive: bool = False
+    live: dict[str, Any] | None = None
+    truck: dict[str, Any] | None = None
+    passes: list[dict[str, Any]] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)
+    closed: list[dict[str, Any]] = field(default_factory=list)
+
+
+class CabState:
+    """Cab state from messages (no Zenoh here, so it is tested directly)."""
+
+    def __init__(self) -> None:
+        self.shovels: dict[str, ShovelView] = {}
+        self.lock = threading.Lock()
+        self.lines: list[str] = []
+        """Line-mode output waiting to be printed."""
+        self._last_phase: dict[str, str] = {}
+        self.closed_trucks = 0
+
+    def view(self, shovel: str) -> ShovelView:
+        v = self.shovels.get(shovel)
+        if v is None:
+            v = self.shovels[shovel] = ShovelView(shovel)
+        return v
+
+    def on_message(self, shovel: str, topic: str, msg: dict[str, Any]) -> None:
+        with self.lock:
+            v = self.view(shovel)
+            v.alive = True
+            stamp = time.strftime("%H:%M:%S", time.localtime(msg.get("time") or msg.get("end")
+                                                             or time.time()))
+            if topic == "payload/live":
+                v.live = msg
+                ph = msg.get("phase", "?")
+                if self._last_phase.get(shovel) != ph:
+                    self._last_phase[shovel] = ph
+                    val = (f"{msg['payload_kg']:.0f} kg +- {msg['std_kg']:.0f} kg"
+                           if msg.get("valid") and msg.get("payload_kg") is not None
+                           else "no valid estimate")
+                    self.lines.append(f"{stamp} {shovel} {ph:7s} live {val}")
+            elif topic == "pass":
+                if not any(p.get("pass") == msg.get("pass") for p in v.passes):
+                    if v.truck and v.truck.get("truck") != msg.get("truck"):
+                        v.passes = []
+                    v.passes.append(msg)
+                val = (f"{msg['payload_kg']:.0f} kg +- {msg['std_kg']:.0f} kg" if msg.get("valid")
+                       else f"INVALID ({msg.get('reason')})")
+                self.lines.append(f"{stamp} {shovel} pass {msg.get('pass')} truck "
+                                  f"{msg.get('truck')}: {val}")
+            elif topic == "truck":
+                if msg.get("closed"):
+                    v.closed.append(msg)
+                    self.closed_trucks += 1
+                else:
+                    if v.truck and v.truck.get("truck") != msg.get("truck"):
+                        v.passes = [p for p in v.passes if p.get("truck") == msg.get("truck")]
+                    v.truck = msg
+                self.lines.append(
+                    f"{time.strftime('%H:%M:%S')} {shovel} truck {msg.get('truck')}"
+                    f"{' CLOSED' if msg.get('closed') else ''}: {msg.get('passes')} passes, "
+                    f"{msg.get('total_kg', 0):.0f} of {msg.get('target_kg', 0):.0f} kg "
+                    f"({msg.get('fill_pct')} %) {msg.get('status')}")
+            elif topic == "health":
+                probs = list(msg.get("problems") or [])
+                if probs != v.problems:
+                    self.lines.append(f"{time.strftime('%H:%M:%S')} {shovel} health: "
+                                      + ("; ".join(probs) if probs else "all ok"))
+                v.problems = probs
+
+    def on_status(self, shovel: str, st: dict[str, Any]) -> None:
+        with self.lock:
+            v = self.view(shovel)
+            v.alive = True
+            if st.get("truck"):
+                v.truck = st["truck"]
+            v.passes = list(st.get("truck_passes") or [])
+            if st.get("live"):
+                v.live = st["live"]
+            v.problems = list(st.get("problems") or [])
+        self.lines.append(f"{time.strftime('%H:%M:%S')} {shovel} status: truck "
+                          f"{(st.get('truck') or {}).get('truck')}, "
+                          f"{len(v.passes)} passes so far")
+
+    def on_alive(self, shovel: str, alive: bool) -> None:
+        with self.lock:
+            self.view(shovel).alive = alive
+            self.lines.append(f"{time.strftime('%H:%M:%S')} {shovel} daemon "
+                              f"{'alive' if alive else 'LOST'}")
+
+    def take_lines(self) -> list[str]:
+        with self.lock:
+            out, self.lines = self.lines, []
+        return out
+
+    def screen(self, width: int = 72) -> str:
+        """The whole cab screen as text."""
+        out: list[str] = []
+        with self.lock:
+            if not self.shovels:
+                return "waiting for a shovel on Zenoh ...\n"
+            for name in sorted(self.shovels):
+                v = self.shovels[name]
+                out.append(f"== {name} " + ("" if v.alive else "(daemon not seen) ")
+                           + "=" * max(0, width - len(name) - 4))
+                lv = v.live or {}
+                if lv.get("valid") and lv.get("payload_kg") is not None:
+                    val = f"{lv['payload_kg']:8.0f} kg  +- {lv['std_kg']:.0f} kg"
+                else:
+                    val = "      -- (no valid estimate)"
+                out.append(f"  phase {lv.get('phase', '?'):7s}  live payload {val}")
+                t = v.truck or {}
+                out.append(f"  truck {t.get('truck', '?')}: {t.get('passes', 0)} passes, "
+                           f"{t.get('total_kg', 0):.0f} of {t.get('target_kg', 0):.0f} kg "
+                           f"({t.get('fill_pct', 0)} %)  {str(t.get('status', '')).upper()}")
+                target = t.get("target_kg") or 1.0
+                fill = min(1.3, (t.get("total_kg") or 0.0) / target)
+                bar_w = width - 12
+                n = int(bar_w * fill / 1.3)
+                mark = int(bar_w / 1.3)
+                bar = "".join("#" if i < n else ("|" if i == mark else ".")
+                              for i in range(bar_w))
+                out.append(f"  [{bar}]")
+                for p in v.passes[-8:]:
+                    if p.get("valid"):
+                        out.append(f"    pass {p['pass']:4d}  {_kg(p.get('payload_kg'))} kg"
+                                   f"  +- {p.get('std_kg') or 0:5.0f} kg")
+                    else:
+                        out.append(f"    pass {p['pass']:4d}  INVALID  {p.get('reason', '')}")
+                if v.closed:
+                    c = v.closed[-1]
+                    out.append(f"  last truck {c['truck']}: {c['total_kg']:.0f} kg "
+                               f"({c['fill_pct']} %) {c['status']}")
+                if v.problems:
+                    out.append("  ! " + "; ".join(v.problems)[: width * 2])
+                out.append("")
+        return "\n".join(out) + "\n"
+
+
+class CabClient:
+    """The Zenoh side of the cab: subscriptions, liveliness, the status query."""
+
+    def __init__(self, state: CabState, connect: list[str], mode: str = "client",
+                 shovel: str = "*", prefix: str = "shovel") -> None:
+        import zenoh
+
+        from shoveld.daemon.publisher import zenoh_config
+
+        self.state = state
+        self.prefix = prefix
+        self.shovel = shovel
+        self.session = zenoh.open(zenoh_config(mode, (), connect))
+        n = len(prefix.split("/"))
+        self._n = n
+
+        def on_sample(sample: Any) -> None:
+            key = str(sample.key_expr).split("/")
+            try:
+                msg = json.loads(sample.payload.to_bytes())
+            except ValueError:
+                return
+            state.on_message(key[n], "/".join(key[n + 1:]), msg)
+
+        base = f"{prefix}/{shovel}"
+        self._subs = [self.session.declare_subscriber(f"{base}/{topic}", on_sample)
+                      for topic in ("payload/live", "pass", "truck", "health")]
+
+        def on_alive(sample: Any) -> None:
+            key = str(sample.key_expr).split("/")
+            state.on_alive(key[n], sample.kind == zenoh.SampleKind.PUT)
+
+        self._subs.append(self.session.liveliness().declare_subscriber(
+            f"{base}/alive", on_alive, history=True))
+
+    def query_status(self, timeout: float = 2.0) -> int:
+        n = 0
+        for reply in self.session.get(f"{self.prefix}/{self.shovel}/status", timeout=timeout):
+            if reply.ok is None:
+                continue
+            key = str(reply.ok.key_expr).split("/")
+            try:
+                st = json.loads(reply.ok.payload.to_bytes())
+            except ValueError:
+                continue
+            self.state.on_status(key[self._n], st)
+            n += 1
+        return n
+
+    def close(self) -> None:
+        for s in self._subs:
+            try:
+                s.undeclare()
+            except Exception:  # noqa: BLE001
+                pass
+        self.session.close()
+
+
+def show(state: CabState, out: TextIO, tty: bool, stop: threading.Event,
+         duration: float | None = None, until_closed: int | None = None,
+         refresh_s: float = 0.25) -> None:
+    """Redraw (TTY) or print lines until stopped, ``duration`` or ``until_closed``."""
+    end = None if duration is None else time.monotonic() + duration
+    if tty:
+        out.write("\x1b[?25l")  # hide the cursor
+    try:
+        while not stop.is_set():
+            if tty:
+                state.take_lines()
+                out.write("\x1b[H\x1b[2J" + state.screen())
+            else:
+                for line in state.take_lines():
+                    out.write(line + "\n")
+            out.flush()
+            if end is not None and time.monotonic() >= end:
+                break
+            if until_closed is not None and state.closed_trucks >= until_closed:
+                break
+            stop.wait(refresh_s)
+    finally:
+        if tty:
+            out.write("\x1b[?25h")
+            out.flush()
+        else:
+            for line in state.take_lines():
+                out.write(line + "\n")
+            out.flush()
+
+
+def run(args: argparse.Namespace) -> int:
+    state = CabState()
+    try:
+        client = CabClient(state, args.connect or ["tcp/127.0.0.1:7447"], args.mode,
+                           args.shovel, args.prefix)
+    except Exception as e:  # noqa: BLE001 - zenoh.ZError
+        raise CliError(f"cannot connect to Zenoh at {args.connect or 'tcp/127.0.0.1:7447'}: "
+                       f"{e}") from None
+    stop = threading.Event()
+    try:
+        client.query_status()
+        show(state, sys.stdout, sys.stdout.isatty() and not args.lines, stop, args.duration,
+             args.until_closed_trucks)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        client.close()
+    return 0

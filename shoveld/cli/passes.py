@@ -1,0 +1,133 @@
+"""``shoveld passes``: the pass log for a shift report (table or CSV).
+
+Reads the daemon's SQLite pass log read-only (safe while the daemon writes, thanks
+to WAL). ``--since``/``--until`` take ISO dates and times (local time unless an
+offset is given), Unix seconds, or a span back from now (``12h``, ``30m``, ``2d``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import datetime as dt
+import re
+import sys
+import time
+from pathlib import Path
+
+from shoveld.cli import CliError
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    from shoveld.daemon.config import DEFAULT_CONFIG
+
+    p = sub.add_parser(
+        "passes", help="export the pass log (shift report)",
+        description="Lists the passes the daemon committed to its pass log, with trucks and "
+                    "the 10/10/20 summary of the trucks closed in the period; --csv for a "
+                    "spreadsheet.")
+    src = p.add_mutually_exclusive_group()
+    src.add_argument("--config", default=None,
+                     help=f"daemon config whose shovel.state_dir to read (default "
+                          f"{DEFAULT_CONFIG})")
+    src.add_argument("--state-dir", default=None, help="the daemon's state directory")
+    src.add_argument("--db", default=None, help="the pass log file itself")
+    p.add_argument("--since", default=None, metavar="WHEN",
+                   help="passes that ended at or after WHEN (ISO time, Unix s, or 12h / 30m / "
+                        "2d back from now)")
+    p.add_argument("--until", default=None, metavar="WHEN", help="... and before WHEN")
+    p.add_argument("--csv", action="store_true", help="CSV on stdout")
+    p.set_defaults(func=run)
+
+
+def parse_when(text: str, now: float | None = None) -> float:
+    """ISO 8601 (local time if naive), Unix seconds, or ``<n>[smhd]`` before now."""
+    now = time.time() if now is None else now
+    s = text.strip()
+    m = re.fullmatch(r"(\d+(?:\.\d+)?)\s*([smhd])", s)
+    if m:
+        mult = {"s": 1, "m": 60, "h": 3600, "d": 86400}[m.group(2)]
+        return now - float(m.group(1)) * mult
+    if re.fullmatch(r"\d{9,}(\.\d*)?", s):
+        return float(s)
+    try:
+        d = dt.datetime.fromisoformat(s)
+    except ValueError:
+        raise CliError(f"cannot read time {text!r}: use e.g. 2026-11-21T18:00, 12h, or Unix "
+                       "seconds") from None
+    if d.tzinfo is None:
+        d = d.astimezone()  # naive = local time
+    return d.timestamp()
+
+
+def iso(t: float | None) -> str:
+    if t is None:
+        return ""
+    return dt.datetime.fromtimestamp(t).astimezone().isoformat(timespec="seconds")
+
+
+def _db(args: argparse.Namespace) -> Path:
+    from shoveld.daemon.config import DEFAULT_CONFIG, ConfigError, load_config
+    from shoveld.daemon.persist import db_path
+
+    if args.db:
+        return Path(args.db)
+    if args.state_dir:
+        return db_path(args.state_dir)
+    try:
+        cfg = load_config(args.config or DEFAULT_CONFIG, check_drivers=False)
+    except ConfigError as e:
+        raise CliError(f"{e} (or give --state-dir / --db)") from None
+    return db_path(cfg.state_dir)
+
+
+def run(args: argparse.Namespace) -> int:
+    from shoveld.daemon.persist import read_passes
+    from shoveld.payload.trucks import Truck, rule_101020
+
+    since = parse_when(args.since) if args.since else None
+    until = parse_when(args.until) if args.until else None
+    path = _db(args)
+    try:
+        rows = read_passes(path, since, until)
+    except FileNotFoundError as e:
+        raise CliError(str(e)) from None
+    except Exception as e:  # noqa: BLE001 - sqlite3.DatabaseError: not a pass log
+        raise CliError(f"{path}: cannot read the pass log: {e}") from None
+    if args.csv:
+        w = csv.writer(sys.stdout, lineterminator="\n")
+        w.writerow(["pass", "truck", "shovel", "start", "end", "payload_kg", "std_kg",
+                    "samples", "valid", "reason"])
+        for r in rows:
+            w.writerow([r["pass"], r["truck"], r["shovel"], iso(r["start"]), iso(r["end"]),
+                        "" if r["payload_kg"] is None else f"{r['payload_kg']:.1f}",
+                        "" if r["std_kg"] is None else f"{r['std_kg']:.1f}",
+                        r["samples"], int(r["valid"]), r["reason"]])
+        return 0
+    if not rows:
+        print(f"no passes in {path}" + (f" since {iso(since)}" if since else ""))
+        return 0
+    for r in rows:
+        val = (f"{r['payload_kg']:9.0f} kg +- {r['std_kg']:5.0f} kg" if r["valid"]
+               else f"INVALID: {r['reason']}")
+        print(f"pass {r['pass']:5d}  truck {r['truck']:4d}  {iso(r['start'])} .. "
+              f"{iso(r['end'])[11:]}  {val}")
+    trucks: dict[int, Truck] = {}
+    closed: dict[int, bool] = {}
+    for r in rows:
+        t = trucks.setdefault(r["truck"], Truck(r["truck"], r["truck_target_kg"] or 1.0))
+        t.passes.append({"payload_kg": r["payload_kg"], "std_kg": r["std_kg"] or 0.0,
+                         "valid": r["valid"]})
+        closed[r["truck"]] = r["truck_closed"]
+    print()
+    for i, t in trucks.items():
+        d = t.as_dict()
+        print(f"truck {i:4d}: {d['passes']} passes, {d['total_kg']:9.0f} kg of "
+              f"{d['target_kg']:.0f} kg ({d['fill_pct']:.1f} %), {d['status']}"
+              f"{'' if closed[i] else ' (open)'}")
+    rule = rule_101020([t for i, t in trucks.items() if closed[i]])
+    if rule["trucks"]:
+        print(f"10/10/20 over {rule['trucks']} closed trucks: mean {rule['mean_pct']} % of "
+              f"target, {rule['over_110_pct']} % over 110 %, {rule['over_120']} over 120 % -> "
+              f"{'compliant' if rule['compliant'] else 'NOT compliant'}")
+    return 0

@@ -1,0 +1,148 @@
+"""``shoveld replay``: the whole daemon fed from a capture, publishing on Zenoh like live."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+import tempfile
+import threading
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from shoveld.cli import CliError
+
+if TYPE_CHECKING:
+    from shoveld.daemon.config import DaemonConfig
+    from shoveld.model.params import ModelParams
+
+log = logging.getLogger("shoveld.replay")
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "replay", help="run the daemon on a capture (drivers, engine, pass log, Zenoh)",
+        description="Feeds a capture folder through the drivers into the daemon. --speed X "
+                    "plays it on the drivers' virtual hardware (ptys, virtual CAN, a local "
+                    "Modbus server) with one thread per driver, X times the recorded pace, "
+                    "exactly like live. --fast steps the same drivers on in-memory transports "
+                    "from the loop: deterministic (same passes every run) and as fast as the "
+                    "machine allows. Passes and trucks are printed as they are committed.")
+    p.add_argument("capture", metavar="CAPTURE", help="capture folder (manifest.json)")
+    mode = p.add_mutually_exclusive_group()
+    mode.add_argument("--speed", type=float, default=None,
+                      help="times the recorded pace (default 1.0)")
+    mode.add_argument("--fast", action="store_true", help="as fast as possible, deterministic")
+    p.add_argument("--config", default=None,
+                   help="daemon config for params, loop, engine, truck and Zenoh settings "
+                        "(its devices are ignored: the capture's are used)")
+    p.add_argument("--params", default=None, help="params file (overrides the config's)")
+    p.add_argument("--state-dir", default=None,
+                   help="pass log directory (default: a temporary one, removed at the end)")
+    p.add_argument("--id", default=None, help="shovel id on Zenoh (default: the config's, "
+                   "else 'replay')")
+    p.add_argument("--listen", action="append", default=None, metavar="ENDPOINT",
+                   help="Zenoh listen endpoint (repeatable; default tcp/127.0.0.1:7447)")
+    p.add_argument("--connect", action="append", default=None, metavar="ENDPOINT")
+    p.add_argument("--mode", choices=("peer", "client"), default=None)
+    p.add_argument("--zenoh-wait", type=float, default=2.0,
+                   help="seconds to wait for the Zenoh session before playing")
+    p.add_argument("--keep-open", type=float, default=0.0, metavar="S",
+                   help="stay on Zenoh this long after the end (late subscribers, queries)")
+    p.add_argument("--json", action="store_true", help="JSON lines on stdout")
+    p.set_defaults(func=run)
+
+
+def build_config(args: argparse.Namespace, state_dir: Path) -> tuple[DaemonConfig, ModelParams]:
+    """The daemon config and params for a replay, from --config and the overrides."""
+    import dataclasses
+
+    from shoveld.cli.common import read_params
+    from shoveld.daemon.config import ConfigError, check_params, load_config, parse_config
+
+    try:
+        if args.config:
+            cfg = load_config(args.config, check_drivers=False, require_devices=False)
+        else:
+            if not args.params:
+                raise CliError("give --params FILE (or --config FILE naming one)")
+            cfg = parse_config({"shovel": {"id": "replay", "params": str(args.params)}},
+                               "<replay>", require_devices=False)
+    except ConfigError as e:
+        raise CliError(str(e)) from None
+    z = cfg.zenoh
+    zr = dataclasses.replace(
+        z, mode=args.mode or z.mode,
+        listen=tuple(args.listen) if args.listen is not None else z.listen,
+        connect=tuple(args.connect) if args.connect is not None else z.connect)
+    cfg = dataclasses.replace(cfg, zenoh=zr, state_dir=state_dir,
+                              shovel_id=args.id or cfg.shovel_id)
+    if args.params:
+        params = read_params(args.params)
+    else:
+        try:
+            params = check_params(cfg)
+        except ConfigError as e:
+            raise CliError(str(e)) from None
+    return cfg, params
+
+
+def run(args: argparse.Namespace) -> int:
+    from drivers.capture.format import CaptureFormatError
+    from shoveld.daemon.logs import setup_logging
+    from shoveld.daemon.replay import fast_replay_service, replay_service
+
+    setup_logging("DEBUG" if args.verbose > 1 else "INFO" if args.verbose else "WARNING")
+    tmp = None
+    if args.state_dir:
+        state_dir = Path(args.state_dir)
+    else:
+        tmp = tempfile.TemporaryDirectory(prefix="shoveld-replay-")
+        state_dir = Path(tmp.name)
+    try:
+        cfg, params = build_config(args, state_dir)
+        try:
+            if args.fast:
+                rr = fast_replay_service(args.capture, cfg, params)
+            else:
+                rr = replay_service(args.capture, cfg, params,
+                                    args.speed if args.speed is not None else 1.0)
+        except (CaptureFormatError, FileNotFoundError) as e:
+            raise CliError(str(e)) from None
+
+        def on_event(kind: str, msg: dict[str, object]) -> None:
+            if args.json:
+                print(json.dumps({"topic": kind, **msg}), flush=True)
+            elif kind == "pass":
+                val = (f"{msg['payload_kg']:9.0f} kg +- {msg['std_kg']:5.0f} kg"
+                       if msg["valid"] else f"INVALID: {msg['reason']}")
+                print(f"pass {msg['pass']:4d}  truck {msg['truck']:3d}  {val}", flush=True)
+            elif msg.get("closed"):
+                print(f"truck {msg['truck']:3d} closed: {msg['passes']} passes, "
+                      f"{msg['total_kg']:.0f} kg of {msg['target_kg']:.0f} kg "
+                      f"({msg['fill_pct']} %), {msg['status']}", flush=True)
+
+        rr.service.on_event = on_event
+        stop = threading.Event()
+        from shoveld.cli.run import install_stop_signals
+
+        install_stop_signals(stop)
+        try:
+            rr.service.start(zenoh_wait_s=args.zenoh_wait)
+            figures = rr.run(stop)
+            rr.service.flush()
+            if args.keep_open > 0:
+                stop.wait(args.keep_open)
+        finally:
+            rr.close()
+        if args.json:
+            print(json.dumps({"topic": "replay", **figures}))
+        else:
+            print(f"replayed {figures['capture_s']:.1f} s of capture in {figures['real_s']:.1f} s"
+                  f" ({figures['speed_x']}x real time, {figures['cpu_s']:.1f} s CPU)",
+                  file=sys.stderr)
+    finally:
+        if tmp is not None:
+            tmp.cleanup()
+    return 0

@@ -1,0 +1,132 @@
+"""The whole daemon fed from a capture, through the drivers and their virtual hardware.
+
+:func:`replay_service` opens the capture with the drivers' replay (ptys, a virtual
+CAN bus, a local Modbus server answering from the recording), points each device's
+recorded driver configuration at its replay endpoint, and builds a normal
+:class:`Service` on a replay clock: stepped (as fast as the machine allows,
+deterministic) or paced at ``speed`` times the recorded pace. Everything after the
+drivers - store, assembly, engine, pass log, Zenoh - is the live code.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from shoveld.daemon.clock import ReplayPacedClock, ReplayStepClock, SimClock
+from shoveld.daemon.config import DaemonConfig, DeviceConfig, device_signals
+from shoveld.daemon.service import Service
+from shoveld.daemon.syncreplay import SyncReplay
+from shoveld.installation import Installation
+from shoveld.model.params import ModelParams
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class ReplayRun:
+    """A service wired to a replay session; ``run()`` plays it to the end."""
+
+    service: Service
+    session: Any
+    speed: float | None
+
+    def run(self, stop: threading.Event | None = None, connect_timeout_s: float = 15.0
+            ) -> dict[str, Any]:
+        """Wait for the drivers, play the capture, close the last truck; return figures."""
+        stop = stop or threading.Event()
+        svc = self.service
+        paced = self.speed is not None and svc.driver_threads
+        if paced and not svc.wait_drivers(connect_timeout_s):
+            # paced: give the drivers their handshakes before the recording runs away.
+            # Stepped: time stands still until the loop moves it, and some devices only
+            # count as connected once data flows, so the loop starts at once.
+            down = [n for n, d in svc.drivers.items() if not d.health.connected]
+            log.warning("replay: drivers %s not connected after %.0f s; playing anyway", down,
+                        connect_timeout_s)
+        t_cpu, t_real = time.process_time(), time.monotonic()
+        t0 = svc.clock.now()
+        svc.run(stop, done=lambda: self.session.finished)
+        real = time.monotonic() - t_real
+        played = svc.clock.now() - t0
+        return {"capture_s": round(played, 3), "real_s": round(real, 3),
+                "speed_x": round(played / real, 1) if real > 0 else None,
+                "cpu_s": round(time.process_time() - t_cpu, 3),
+                "ticks": svc.loop_stats.ticks,
+                "unsettled_steps": getattr(self.session.clock, "unsettled_steps", 0)}
+
+    def close(self) -> None:
+        try:
+            self.service.close()
+        finally:
+            self.session.close()
+
+
+def replay_devices(session: Any, max_age_s: float) -> dict[str, DeviceConfig]:
+    """DeviceConfigs of the recorded devices, re-pointed at their replay endpoints."""
+    out = {}
+    for name in session.endpoints:
+        d = session.driver_config(name)
+        kind = d["kind"]
+        out[name] = DeviceConfig(name, kind, d, max_age_s, device_signals(kind, d))
+    return out
+
+
+def _installation(cap: Any, default: Installation) -> Installation:
+    if not cap.installation:
+        return default
+    known = {f.name for f in dataclasses.fields(Installation)}
+    return Installation(**{k: float(v) for k, v in cap.installation.items() if k in known})
+
+
+def fast_replay_service(capture_dir: str | Path, cfg: DaemonConfig, params: ModelParams, *,
+                        record_stats: bool = False, close_truck_at_end: bool = True
+                        ) -> ReplayRun:
+    """The service on :class:`SyncReplay`: deterministic, as fast as the engine allows."""
+    from drivers.capture.format import read_capture
+
+    cap = read_capture(Path(capture_dir))
+    devices = {}
+    for name, dev in cap.devices.items():
+        d = dict(dev.settings.get("config") or {})
+        d["kind"] = dev.kind
+        devices[name] = DeviceConfig(name, dev.kind, d, cfg.loop.max_age_s,
+                                     device_signals(dev.kind, d))
+    sync = SyncReplay(capture_dir, devices)
+    rcfg = dataclasses.replace(cfg, devices=devices,
+                               installation=_installation(sync.capture, cfg.installation))
+    svc = Service(rcfg, params, clock=SimClock(0.0, float(cap.start_unix)),
+                  driver_clock=sync.clock, drivers=sync.drivers, driver_threads=False,
+                  before_tick=sync.step, record_stats=record_stats,
+                  close_truck_at_end=close_truck_at_end)
+    sync.attach({n: svc.store.sink(n) for n in devices})
+    return ReplayRun(svc, sync, None)
+
+
+def replay_service(capture_dir: str | Path, cfg: DaemonConfig, params: ModelParams,
+                   speed: float | None = None, *, record_stats: bool = False,
+                   close_truck_at_end: bool = True, **replay_kw: Any) -> ReplayRun:
+    """Open the capture on the drivers' virtual hardware and build the service on it
+    (not started): paced at ``speed``, or on the stepped replay clock (None)."""
+    from drivers.capture.replay import open_replay
+
+    session = open_replay(capture_dir, speed=speed, **replay_kw)
+    try:
+        cap = session.capture
+        devices = replay_devices(session, cfg.loop.max_age_s)
+        rcfg = dataclasses.replace(cfg, devices=devices,
+                                   installation=_installation(cap, cfg.installation))
+        origin = float(cap.start_unix)
+        clock = (ReplayStepClock(session.clock, origin) if speed is None
+                 else ReplayPacedClock(session.clock, origin))
+        svc = Service(rcfg, params, clock=clock, driver_clock=session.clock,
+                      record_stats=record_stats, close_truck_at_end=close_truck_at_end)
+    except BaseException:
+        session.close()
+        raise
+    return ReplayRun(svc, session, speed)
