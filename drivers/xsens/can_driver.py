@@ -17,12 +17,15 @@ RateOfTurn         0x032   3 x int16 x/y/z          2^-9 rad/s
 Acceleration       0x034   3 x int16 x/y/z          2^-8 m/s^2
 =================  ======  =======================  ==================================
 
-Confirmed from the vendor: the ids (SDK enum; Movella "CAN Messages" page for 0x001,
-0x005, 0x006, which also states SampleTime counts 10 kHz ticks, while an SDK comment
-says microseconds - hence ``sample_time_scale_s``). Not read in a vendor document
-here, taken from public notes citing the MT CAN Protocol Documentation (MT1604P) and
-therefore configurable: the int16 scalings, the byte order (big-endian like Xbus,
-``byteorder``), and the quaternion scale (2^-15 here; one source says 1/32767).
+Sources: the ids are the vendor SDK enum and the Movella "CAN Messages" page (which
+documents 0x001, 0x005, 0x006 and says SampleTime counts 10 kHz ticks). The int16
+scalings and the big-endian (Motorola) byte order are those of the Xsens CAN database
+``xsens.dbc`` (a copy in a public repository; Movella says the .dbc is published on
+Xsens BASE, which I could not reach) and agree with public notes citing the MT CAN
+Protocol Documentation (MT1604P), which I could not read. The same .dbc gives the
+SampleTime unit as "us", contradicting the Movella page: hence
+``sample_time_scale_s`` (default 1e-4, the page's and SampleTimeFine's 10 kHz). All
+scalings and the byte order stay configurable (:class:`MtiCanLayout`).
 CAN output is configured over Xbus (SetCanOutputConfig), not over CAN, so this driver
 only listens; ``open()`` succeeds once an MTi frame arrives. It assembles the frames of
 one output group and emits a :class:`Reading` when every configured message of the
