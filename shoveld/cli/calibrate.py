@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 
 from shoveld.cli import CliError
 from shoveld.cli.common import parse_effects, read_tables
@@ -24,6 +25,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--window", type=float, default=0.5,
                    help="zero-phase smoothing window for rates, s")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
+    p.add_argument("--plot", metavar="DIR",
+                   help="write PNG plots of the fit (residuals, exclusions) per file")
     p.set_defaults(func=run)
 
 
@@ -70,6 +73,14 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(str(e)) from None
     assert cal.params_ is not None
     save_params(args.out, cal.params_)
+    if args.plot:
+        from shoveld.plots import plot_calibration
+
+        try:
+            for path in plot_calibration(cal, args.plot):
+                print(f"plot: {path}", file=sys.stderr)
+        except RuntimeError as e:
+            raise CliError(str(e)) from None
     if args.json:
         print(json.dumps({"params": cal.params_.as_dict(),
                           "stderr": dict(zip(cal.params_.names,

@@ -6,6 +6,7 @@ import argparse
 import json
 import sys
 
+from shoveld.cli import CliError
 from shoveld.cli.common import read_params, read_tables
 
 
@@ -23,6 +24,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--truck-target", type=float, default=136000.0, help="kg per truck")
     p.add_argument("--truck-gap", type=float, default=20.0,
                    help="a pause without digging this long (s) starts a new truck")
+    p.add_argument("--plot", metavar="PNG",
+                   help="plot phases, live payload and passes (one file per table: "
+                        "PNG gets the table's name inserted when there are several)")
     p.set_defaults(func=run)
 
 
@@ -37,7 +41,20 @@ def run(args: argparse.Namespace) -> int:
     next_pass, next_truck = 1, 1
     trucks = []
     for table in tables:
-        est = estimate_table(table, params, cfg, next_pass, next_truck)
+        est = estimate_table(table, params, cfg, next_pass, next_truck,
+                             keep_live=bool(args.plot))
+        if args.plot:
+            from pathlib import Path
+
+            from shoveld.plots import plot_estimate
+
+            out = Path(args.plot)
+            if len(tables) > 1:
+                out = out.with_name(f"{out.stem}-{Path(table.source).stem}{out.suffix}")
+            try:
+                print(f"plot: {plot_estimate(table, est, out)}", file=sys.stderr)
+            except RuntimeError as e:
+                raise CliError(str(e)) from None
         for p in est.passes:
             d = {**p.as_dict(), "file": table.source}
             if args.json:

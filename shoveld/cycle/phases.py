@@ -30,7 +30,12 @@ class PhaseConfig:
     swing_off_deg_s: float = 1.5
     stop_hold_s: float = 0.3
     """The swing must stay below ``swing_off`` this long to count as stopped."""
-    idle_rate_deg_s: float = 0.5
+    idle_rate_deg_s: float = 1.5
+    """Handle slower than this, swing slower than ``idle_swing_deg_s`` and crowd slower than
+    ``idle_crowd_m_s`` (each above its filter's largest noise at rest) for ``idle_hold_s``
+    means the machine is idle."""
+    idle_swing_deg_s: float = 3.0
+    idle_crowd_m_s: float = 0.08
     idle_hold_s: float = 10.0
     min_dig_s: float = 2.0
 
@@ -57,8 +62,8 @@ class PhaseMachine:
         c = self.cfg
         if any(math.isnan(x) for x in (th_deg, thd_deg_s, swing_rate_deg_s)):
             return self.phase
-        moving = (abs(thd_deg_s) > c.idle_rate_deg_s or abs(swing_rate_deg_s) > c.idle_rate_deg_s
-                  or abs(crowd_rate_m_s) > 0.02)
+        moving = (abs(thd_deg_s) > c.idle_rate_deg_s or abs(swing_rate_deg_s) > c.idle_swing_deg_s
+                  or abs(crowd_rate_m_s) > c.idle_crowd_m_s)
         if moving:
             self._still_since = None
         elif self._still_since is None:

@@ -4,7 +4,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from shoveld.engine.loop import Engine, EngineConfig, PassResult, TruckResult, run_engine
+from shoveld.engine.loop import (
+    Engine,
+    EngineConfig,
+    LiveEstimate,
+    PassResult,
+    TruckResult,
+    run_engine,
+)
 from shoveld.model.params import ModelParams
 from shoveld.payload.trucks import Truck
 from shoveld.sample import samples_from_table
@@ -15,10 +22,13 @@ from shoveld.signals.table import SignalsTable
 class Estimate:
     passes: list[PassResult] = field(default_factory=list)
     trucks: list[Truck] = field(default_factory=list)
+    live: list[LiveEstimate] = field(default_factory=list)
+    """Every tick's live estimate, when asked for (plots)."""
 
 
 def estimate_table(table: SignalsTable, params: ModelParams, cfg: EngineConfig | None = None,
-                   first_pass: int = 1, first_truck: int = 1) -> Estimate:
+                   first_pass: int = 1, first_truck: int = 1, keep_live: bool = False
+                   ) -> Estimate:
     """Passes and closed trucks of one table (rate taken from the table)."""
     base = cfg or EngineConfig()
     rate = table.sample_rate_hz
@@ -30,4 +40,6 @@ def estimate_table(table: SignalsTable, params: ModelParams, cfg: EngineConfig |
             out.passes.append(ev)
         elif isinstance(ev, TruckResult) and ev.closed:
             out.trucks.append(ev.truck)
+        elif keep_live and isinstance(ev, LiveEstimate):
+            out.live.append(ev)
     return out

@@ -28,7 +28,7 @@ class JointFilterConfig:
 
 HANDLE = JointFilterConfig(meas_std=math.radians(0.03), jerk_std=1.0)
 CROWD = JointFilterConfig(meas_std=0.002, jerk_std=4.0)
-SWING = JointFilterConfig(meas_std=math.radians(0.1), jerk_std=2.0)
+SWING = JointFilterConfig(meas_std=math.radians(0.1), jerk_std=1.0)
 
 
 class JointFilter:
