@@ -86,6 +86,7 @@ class Service:
         self._next_health = -math.inf
         self._pending_arrivals: list[float] = []
         self._prev_overruns = 0
+        self._prev_ticks = 0
         # snapshots for the status query (replaced whole, read from Zenoh's thread)
         self.live_msg: dict[str, Any] | None = None
         self.truck_msg: dict[str, Any] | None = None
@@ -332,7 +333,9 @@ class Service:
                    for name in self.cfg.devices}
         loop = self.loop_stats.as_dict(self.cfg.loop.rate_hz, self.clock.simulated)
         loop["overruns_recent"] = self.loop_stats.overruns - self._prev_overruns
+        loop["ticks_recent"] = self.loop_stats.ticks - self._prev_ticks
         self._prev_overruns = self.loop_stats.overruns
+        self._prev_ticks = self.loop_stats.ticks
         loop["publish_latency_ms"] = self.latency.as_dict()
         zen = self.publisher.health()
         persist = {"passes_written": self.passes_written, "queue": self._q.qsize(),
