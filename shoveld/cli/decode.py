@@ -41,18 +41,22 @@ def _mti_arguments(p: argparse.ArgumentParser) -> None:
                    help="also print non-MTData2 messages as {mid, name, data_hex}")
 
 
+def _num(v: float | int) -> str:
+    """JSON text of a number; repr is valid JSON for finite floats and ~3x cheaper."""
+    r = repr(v)
+    return r if r not in ("nan", "inf", "-inf") else json.dumps(v)
+
+
 def decode_mti(src: BinaryIO, out: TextIO, err: TextIO, args: argparse.Namespace) -> int:
     """Decode an Xbus byte stream; print MTData2 messages as JSON lines."""
-    from drivers.xsens.mtdata2 import TYPE_MASK, XDI, decode_mtdata2
+    from drivers.xsens.mtdata2 import XDI, mtdata2_values
     from drivers.xsens.xbus import MID, MID_NAMES, XbusParser, describe_error
 
-    keys = {XDI.PACKET_COUNTER: "packet_counter", XDI.SAMPLE_TIME_FINE: "sample_time_fine",
-            XDI.EULER_ANGLES: "euler_deg", XDI.QUATERNION: "quaternion",
-            XDI.ACCELERATION: "acceleration", XDI.RATE_OF_TURN: "rate_of_turn",
-            XDI.MAGNETIC_FIELD: "magnetic_field", XDI.TEMPERATURE: "temperature",
-            XDI.STATUS_WORD: "status", XDI.STATUS_BYTE: "status"}
-    order = ("packet_counter", "sample_time_fine", "euler_deg", "quaternion", "acceleration",
-             "rate_of_turn", "magnetic_field", "temperature", "status")
+    fields = (("packet_counter", XDI.PACKET_COUNTER), ("sample_time_fine", XDI.SAMPLE_TIME_FINE),
+              ("euler_deg", XDI.EULER_ANGLES), ("quaternion", XDI.QUATERNION),
+              ("acceleration", XDI.ACCELERATION), ("rate_of_turn", XDI.RATE_OF_TURN),
+              ("magnetic_field", XDI.MAGNETIC_FIELD), ("temperature", XDI.TEMPERATURE),
+              ("status", XDI.STATUS_WORD), ("status", XDI.STATUS_BYTE))
     show_all = bool(getattr(args, "all", False))
     parser = XbusParser()
     n_msgs = n_data = 0
@@ -65,15 +69,21 @@ def decode_mti(src: BinaryIO, out: TextIO, err: TextIO, args: argparse.Namespace
             n_msgs += 1
             if msg.mid == MID.MTDATA2:
                 n_data += 1
-                obj: dict[str, Any] = {}
-                for item in decode_mtdata2(msg.data):
-                    k = keys.get(item.xdi & TYPE_MASK)
-                    if k is None or item.name.endswith("?"):
+                vals = mtdata2_values(msg.data)
+                parts = []
+                seen = set()
+                for key, xdi in fields:
+                    v = vals.get(xdi)
+                    if v is None or key in seen:
                         continue
-                    v = item.value
-                    obj[k] = v[0] if k == "temperature" else list(v) if isinstance(v, tuple) \
-                        else v
-                lines.append(json.dumps({k: obj[k] for k in order if k in obj}))
+                    seen.add(key)
+                    if key == "temperature":
+                        v = v[0]
+                    if isinstance(v, tuple):
+                        parts.append(f'"{key}": [{", ".join(map(_num, v))}]')
+                    else:
+                        parts.append(f'"{key}": {_num(v)}')
+                lines.append("{" + ", ".join(parts) + "}")
             elif show_all:
                 o: dict[str, Any] = {"mid": msg.mid, "name": MID_NAMES.get(msg.mid, "?"),
                                      "data_hex": msg.data.hex()}
