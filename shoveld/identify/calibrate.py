@@ -60,6 +60,8 @@ def exclusion_masks(table: SignalsTable, model: Model, cfg: ExclusionConfig,
     """Kinematics of a table and, per sample, whether and why it is excluded."""
     cols = model.transform(dict(table.columns))
     kin, ok = offline_kinematics(cols, window_s)
+    # Terms nonlinear in a current take it from the neighbouring samples (see Kinematics).
+    kin.estimate_currents(int(round(window_s * table.sample_rate_hz)))
     n = len(kin)
     reasons = np.full(n, "", dtype=object)
     payload = table.payload_truth()

@@ -62,7 +62,21 @@ class Model:
         empty = np.zeros((n, 2, 0))
         w_all = np.concatenate(ws, axis=2) if ws else empty
         psi_all = np.concatenate(psis, axis=2) if psis else empty
-        return w_all, payload_phi(k), psi_all
+        phi = payload_phi(k)
+        # An extension may change what existing parameters multiply (e.g. swing adds a
+        # centrifugal part to the arm's mass columns) and add known per-kg payload physics.
+        for t in self.terms:
+            shared = getattr(t, "shared_columns", None)
+            if shared is not None:
+                for name, col in shared(k).items():
+                    if name not in self.param_names:
+                        raise ValueError(f"term {t.name!r} adds to parameter {name!r}, "
+                                         "which no term of the model has")
+                    w_all[:, :, self.param_names.index(name)] += col
+            extra_phi = getattr(t, "payload_phi", None)
+            if extra_phi is not None:
+                phi = phi + extra_phi(k)
+        return w_all, phi, psi_all
 
     def payload_equations(self, k: Kinematics, p: np.ndarray
                           ) -> tuple[np.ndarray, np.ndarray]:

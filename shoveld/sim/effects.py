@@ -30,6 +30,8 @@ class SimEffect:
     default_magnitude: ClassVar[float] = 1.0
     magnitude_unit: ClassVar[str] = ""
     description: ClassVar[str] = ""
+    typical_range: ClassVar[tuple[float, float]] = (0.0, 0.0)
+    """Magnitudes a real machine plausibly shows (the tests draw from this range)."""
 
     def __init__(self, magnitude: float | None = None) -> None:
         self.magnitude = self.default_magnitude if magnitude is None else float(magnitude)
@@ -64,3 +66,424 @@ def make_effects(spec: dict[str, float | None]) -> list[SimEffect]:
     if unknown:
         raise ValueError(f"unknown sim effect(s) {unknown}; known: {sorted(SIM_EFFECTS)}")
     return [SIM_EFFECTS[n](m) for n, m in spec.items()]
+
+
+# ---------------------------------------------------------------------------------------
+# The effects. Each is written from the mechanics or the drive/sensor physics, in the
+# simulator's own Cartesian terms; none calls the model's closed forms.
+# ---------------------------------------------------------------------------------------
+
+DRUM_XY = np.array([-6.5, -5.5])
+"""Hoist drum (where the rope is wound), in the arm plane relative to the shipper shaft, m."""
+BOOM_FOOT_BELOW_SHAFT_M = 6.0
+"""Boom foot pin, measured down the boom line from the shipper shaft, m."""
+
+
+def _sheave(boom: np.ndarray, l_bs: float) -> np.ndarray:
+    return l_bs * np.stack([np.cos(boom), np.sin(boom)], axis=-1)
+
+
+def _bail(th: np.ndarray, d: np.ndarray) -> np.ndarray:
+    return d[:, None] * np.stack([np.cos(th), np.sin(th)], axis=-1)
+
+
+def _fine_to_samples(ctx: dict[str, Any], x: np.ndarray) -> np.ndarray:
+    return x[ctx["sample_index"]]
+
+
+@register_effect
+class FieldWeakeningEffect(SimEffect):
+    """The hoisting field is not held at 70 A: the regulator moves it with the rope pull.
+
+    Field forcing: to get more pull per ampere when the dipper is heavy, the drive
+    raises the hoist field setpoint with the load, 70 A + M x (rope pull / pull at
+    500 A); a negative M is a field that sags with load instead. Lowering stays at
+    30 A. The field winding's lag and the plant's magnetisation curve
+    (flux ~ tanh(i_f / knee)) turn this into a force per ampere that changes with
+    the load and during the lift, while the base model assumes the 70 A value.
+    """
+
+    name = "hoist_field_weakening"
+    default_magnitude = 6.0
+    magnitude_unit = "A (field change at 500 A of hoist pull)"
+    description = "hoist field current moving with the rope pull while hoisting"
+    typical_range = (4.0, 10.0)
+    ref_a = 500.0
+
+    def before_currents(self, ctx: dict[str, Any]) -> None:
+        from shoveld.sim.plant import derivative, first_order_lag, rope_length
+
+        pp, m, dt = ctx["params"], ctx["motion"], ctx["dt"]
+        boom = ctx.get("boom_true", m.boom)
+        lr = derivative(rope_length(m.th, m.d, boom, pp.l_bs), dt)
+        load = np.clip(ctx["rope_force"] / (pp.K_H * self.ref_a), 0.0, 2.0)
+        hoisting = pp.hoist_field_hoisting_a + self.magnitude * load
+        target = np.where(lr > 0.02, pp.hoist_field_lowering_a, hoisting)
+        ctx["i_hf"] = first_order_lag(target, dt, pp.hoist_field_tau_s)
+
+
+@register_effect
+class SwingCentrifugalEffect(SimEffect):
+    """The arm plane turns about the swing axis: the bodies move in 3D.
+
+    Every body of the arm (the arm as a slender dumbbell with its inertia, the
+    payload, any rope elements) is placed in 3D at horizontal radius R0 + x from the
+    swing axis, its acceleration taken by differentiating the 3D positions on the
+    fine grid, and the generalized forces on (th, d) follow by virtual work with
+    numerical Jacobians. The difference to the same computation in the plane is what
+    the swing adds. Magnitude: R0, the swing axis to shipper shaft radius.
+    """
+
+    name = "swing_centrifugal"
+    default_magnitude = 4.5
+    magnitude_unit = "m (swing axis to shipper shaft)"
+    description = "arm plane rotating during swing (3D virtual work)"
+    typical_range = (2.5, 6.5)
+
+    @staticmethod
+    def _points(bodies: list[Any], th: np.ndarray) -> list[tuple[Any, Any]]:
+        """(mass, position function) of point masses equivalent to the bodies."""
+        pts: list[tuple[Any, Any]] = []
+        for b in bodies:
+            m = b.mass
+            if not b.inertia:
+                pts.append((m, b.position))
+                continue
+            delta = float(np.sqrt(b.inertia / np.mean(m)))
+            for sgn in (-1.0, 1.0):
+                def pos(t_, d_, bo_, f=b.position, s=sgn * delta):
+                    return f(t_, d_, bo_) + s * np.stack([np.cos(t_), np.sin(t_)], axis=-1)
+                pts.append((np.asarray(m) * 0.5, pos))
+        return pts
+
+    def extra_forces(self, ctx: dict[str, Any]) -> np.ndarray:
+        from shoveld.sim.plant import derivative
+
+        m = ctx["motion"]
+        dt = ctx["dt"]
+        th, d = m.th, m.d
+        boom = ctx.get("boom_true", m.boom)
+        psi = m.swing
+        cps, sps = np.cos(psi), np.sin(psi)
+        r0 = self.magnitude
+        eps = 1e-6
+        q = np.zeros((len(th), 2))
+        for mass, pos in self._points(ctx["bodies"], th):
+            mass = np.asarray(mass, dtype=float)
+            mass = mass[:, None] if mass.ndim else mass
+
+            def p3(t_, d_, f=pos):
+                xy = f(t_, d_, boom)
+                rad = r0 + xy[:, 0]
+                return np.stack([rad * cps, xy[:, 1], rad * sps], axis=-1)
+
+            def p2(t_, d_, f=pos):
+                return f(t_, d_, boom)
+
+            for place in (p3, p2):
+                x = place(th, d)
+                a = derivative(derivative(x, dt), dt)
+                j_th = (place(th + eps, d) - place(th - eps, d)) / (2 * eps)
+                j_d = (place(th, d + eps) - place(th, d - eps)) / (2 * eps)
+                sign = 1.0 if place is p3 else -1.0
+                # Gravity is the same vertical vector in both; it cancels in the difference.
+                q[:, 0] += sign * np.einsum("ij,ij->i", mass * a, j_th)
+                q[:, 1] += sign * np.einsum("ij,ij->i", mass * a, j_d)
+        return q
+
+
+@register_effect
+class SensorTimeSkewEffect(SimEffect):
+    """The arm-geometry sensor's readings are late against the current logger.
+
+    The MTi and laser on the saddle block report the arm as it was ``magnitude``
+    milliseconds earlier (negative: the logger's analog channels are the late ones).
+    Implemented on the fine-grid truth, so the delayed reading is the real past
+    position, with the sensor noise already drawn.
+    """
+
+    name = "sensor_time_skew"
+    default_magnitude = 80.0
+    magnitude_unit = "ms (arm sensor late; negative: currents late)"
+    description = "one sensor stream delayed against the others"
+    typical_range = (50.0, 160.0)
+
+    def measure(self, cols: dict[str, np.ndarray], ctx: dict[str, Any],
+                rng: np.random.Generator) -> None:
+        m = ctx["motion"]
+        tau = self.magnitude / 1000.0
+        t = cols["time_s"]
+        if tau >= 0:
+            for name, truth, conv in (("handle_deg", m.th, np.degrees),
+                                      ("crowd_m", m.d, lambda x: x),
+                                      ("swing_deg", m.swing, np.degrees)):
+                late = np.interp(t - tau, m.t, truth)
+                cols[name] = cols[name] + conv(late) - conv(np.interp(t, m.t, truth))
+        else:
+            for name in ("hoist1_a", "hoist2_a", "hoist_field_a", "crowd_a", "swing_a",
+                         "boom_deg", "roll_deg", "pitch_deg"):
+                x = cols[name]
+                cols[name] = np.interp(t + tau, t, x)
+
+
+@register_effect
+class PayloadCogOffsetEffect(SimEffect):
+    """The load in the dipper has its centre of gravity forward of and below the bail.
+
+    The payload body is moved from the bail pin to a point fixed in the dipper: a
+    distance ``magnitude`` from the bail, 35 degrees below the handle axis.
+    """
+
+    name = "payload_cog_offset"
+    default_magnitude = 0.8
+    magnitude_unit = "m (bail to load centre)"
+    description = "payload centre of gravity away from the bail"
+    typical_range = (0.5, 1.5)
+    angle_deg = -35.0
+
+    def bodies(self, ctx: dict[str, Any]) -> None:
+        a = self.magnitude * np.cos(np.radians(self.angle_deg))
+        b = self.magnitude * np.sin(np.radians(self.angle_deg))
+
+        def load_pos(th: np.ndarray, d: np.ndarray, boom: np.ndarray) -> np.ndarray:
+            c, s = np.cos(th), np.sin(th)
+            return np.stack([(d + a) * c - b * s, (d + a) * s + b * c], axis=-1)
+
+        for body in ctx["bodies"]:
+            if body.name == "payload":
+                body.position = load_pos
+
+
+@register_effect
+class HoistRopeMassEffect(SimEffect):
+    """The hoist rope between sheave and bail has weight (and inertia).
+
+    The rope is discretised into elements along the sheave-bail chord; their mass
+    is lam times the current free length. The generalized gravity force is the
+    numerical gradient of the rope's potential energy, counting the rope that
+    leaves the span over the sheave as wound on the drum (at the drum's height);
+    the elements' inertia enters by virtual work.
+    """
+
+    name = "hoist_rope_mass"
+    default_magnitude = 60.0
+    magnitude_unit = "kg/m (both hoist ropes)"
+    description = "hoist rope weight between sheave and bail"
+    typical_range = (60.0, 150.0)
+    n_elements = 12
+
+    def _energy(self, th: np.ndarray, d: np.ndarray, boom: np.ndarray, l_bs: float
+                ) -> np.ndarray:
+        b, p = _sheave(boom, l_bs), _bail(th, d)
+        length = np.linalg.norm(b - p, axis=1)
+        s = (np.arange(self.n_elements) + 0.5) / self.n_elements
+        heights = b[:, 1][:, None] + s[None, :] * (p[:, 1] - b[:, 1])[:, None]
+        span = self.magnitude * 9.81 * (length / self.n_elements) * heights.sum(axis=1)
+        wound = -self.magnitude * 9.81 * length * DRUM_XY[1]
+        return span + wound
+
+    def extra_forces(self, ctx: dict[str, Any]) -> np.ndarray:
+        from shoveld.sim.plant import Body, generalized_forces
+
+        m, pp, dt = ctx["motion"], ctx["params"], ctx["dt"]
+        th, d = m.th, m.d
+        boom = ctx.get("boom_true", m.boom)
+        eps = 1e-6
+        q = np.zeros((len(th), 2))
+        q[:, 0] = (self._energy(th + eps, d, boom, pp.l_bs)
+                   - self._energy(th - eps, d, boom, pp.l_bs)) / (2 * eps)
+        q[:, 1] = (self._energy(th, d + eps, boom, pp.l_bs)
+                   - self._energy(th, d - eps, boom, pp.l_bs)) / (2 * eps)
+        length = np.linalg.norm(_sheave(boom, pp.l_bs) - _bail(th, d), axis=1)
+        bodies = []
+        for k in range(self.n_elements):
+            s = (k + 0.5) / self.n_elements
+
+            def pos(t_, d_, bo_, s=s):
+                return _sheave(bo_, pp.l_bs) + s * (_bail(t_, d_) - _sheave(bo_, pp.l_bs))
+            bodies.append(Body(f"rope{k}", self.magnitude * length / self.n_elements, pos))
+        q += generalized_forces(bodies, th, d, boom, dt, np.zeros(2))
+        return q
+
+
+@register_effect
+class LoadDependentFrictionEffect(SimEffect):
+    """Coulomb friction grows with the normal forces the load puts on the bearings.
+
+    Saddle block: mu times the load's weight component across the handle
+    (m g |cos th|). Shipper shaft: mu times the load's weight on a 0.5 m effective
+    bearing/pinion radius. Same velocity taper as the plant's own friction.
+    """
+
+    name = "load_dependent_friction"
+    default_magnitude = 0.05
+    magnitude_unit = "(friction coefficient)"
+    description = "Coulomb friction growing with the payload"
+    typical_range = (0.04, 0.12)
+    shaft_radius_m = 0.5
+
+    def friction(self, ctx: dict[str, Any], fric: np.ndarray) -> np.ndarray:
+        m, pp = ctx["motion"], ctx["params"]
+        s = pp.friction_smoothing
+        w = m.payload * 9.81
+        out = fric.copy()
+        out[:, 0] += self.magnitude * self.shaft_radius_m * w * np.tanh(ctx_rate(ctx, 0) / s)
+        out[:, 1] += self.magnitude * w * np.abs(np.cos(m.th)) * np.tanh(ctx_rate(ctx, 1) / s)
+        return out
+
+
+def ctx_rate(ctx: dict[str, Any], j: int) -> np.ndarray:
+    from shoveld.sim.plant import derivative
+
+    m = ctx["motion"]
+    return derivative(m.th if j == 0 else m.d, ctx["dt"])
+
+
+@register_effect
+class CurrentSaturationEffect(SimEffect):
+    """Motor force falls behind the armature current at high current.
+
+    Each DC motor's force is K I_s asinh(i / I_s): armature reaction and iron
+    saturation flatten the torque curve without a hard ceiling. I_s is set so the
+    force deficit is ``magnitude`` at 250 A per motor. Both hoist motors (sharing the
+    rope pull at the plant's split) and the crowd motor; the currents that deliver
+    the required forces are found by Newton iteration.
+    """
+
+    name = "current_saturation"
+    default_magnitude = 0.06
+    magnitude_unit = "(force deficit at 250 A per motor)"
+    description = "force sub-linear in armature current"
+    typical_range = (0.04, 0.10)
+    ref_a = 250.0
+
+    def _i_sat(self) -> float:
+        from scipy.optimize import brentq
+
+        if self.magnitude <= 0:
+            return np.inf
+        x = brentq(lambda x: np.arcsinh(x) / x - (1.0 - self.magnitude), 1e-6, 1e3)
+        return self.ref_a / x
+
+    def currents(self, ctx: dict[str, Any]) -> None:
+        i_s = self._i_sat()
+        if not np.isfinite(i_s):
+            return
+        split = ctx["params"].hoist_split
+        for key, shares in (("i_h", (split, 1.0 - split)), ("i_c", (1.0,))):
+            lin = ctx[key]  # the current a linear motor would need
+            i = lin.copy()
+            for _ in range(50):
+                f = sum(i_s * np.arcsinh(sh * i / i_s) for sh in shares) - lin
+                df = sum(sh / np.sqrt(1.0 + (sh * i / i_s) ** 2) for sh in shares)
+                step = f / df
+                i = i - step
+                if np.max(np.abs(step)) < 1e-9:
+                    break
+            ctx[key] = i
+
+
+@register_effect
+class GroundSlopeEffect(SimEffect):
+    """The crawlers stand on a slope; the house swings on a tilted axis.
+
+    The ground is tilted by ``magnitude`` degrees towards 40 degrees of swing. In the
+    house frame gravity gets an in-plane component along the arm, -g sin(pitch), and a
+    lateral one, both changing with the swing angle. The handle sensor measures
+    against true gravity (its angle is the elevation of the handle in 3D), the boom
+    angle stays deck-relative, and the cab inclinometer reads the house's pitch and
+    roll.
+    """
+
+    name = "ground_slope"
+    default_magnitude = 3.0
+    magnitude_unit = "deg (ground slope)"
+    description = "machine on a slope, inclinometer sees it"
+    typical_range = (2.0, 6.0)
+    downhill_deg = 40.0
+
+    def _tilt(self, swing: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+        a = np.radians(self.magnitude)
+        rel = np.radians(self.downhill_deg) - swing
+        pitch = np.arcsin(np.sin(a) * np.cos(rel))
+        roll = np.arcsin(np.sin(a) * np.sin(rel))
+        return pitch, roll, float(a)
+
+    def before_dynamics(self, ctx: dict[str, Any]) -> None:
+        m = ctx["motion"]
+        pitch, _, a = self._tilt(m.swing)
+        ctx["gravity"] = np.stack([-9.81 * np.sin(pitch), -9.81 * np.cos(a) * np.ones_like(pitch)],
+                                  axis=-1)
+
+    def measure(self, cols: dict[str, np.ndarray], ctx: dict[str, Any],
+                rng: np.random.Generator) -> None:
+        m = ctx["motion"]
+        idx = ctx["sample_index"]
+        pitch, roll, a = self._tilt(m.swing[idx])
+        th = m.th[idx]
+        elev = np.arcsin(np.cos(th) * np.sin(pitch) + np.sin(th) * np.cos(a))
+        cols["handle_deg"] = cols["handle_deg"] + np.degrees(elev - th)
+        cols["pitch_deg"] = cols["pitch_deg"] + np.degrees(pitch)
+        cols["roll_deg"] = cols["roll_deg"] + np.degrees(roll)
+
+
+class _FixedBoom(SimEffect):
+    """Internal: holds the boom at a given angle (used while iterating the boom's sag)."""
+
+    name = "_fixed_boom"
+
+    def __init__(self, boom: np.ndarray) -> None:
+        super().__init__(0.0)
+        self.boom = boom
+
+    def before_dynamics(self, ctx: dict[str, Any]) -> None:
+        ctx["boom_true"] = self.boom
+
+
+@register_effect
+class BoomSuspensionSpringEffect(SimEffect):
+    """The boom rotates about its foot as the suspension ropes stretch under load.
+
+    The hoist rope pulls the boom-point sheave towards the bail and towards the drum;
+    the moment of those two pulls about the boom foot, over the suspension's
+    rotational stiffness, lowers the boom. The rope pull itself depends on the
+    boom angle, so the plant is re-run to a fixed point. The boom column still shows
+    the boom at rest (the inclinometer is filtered over minutes, as boom vibration
+    demands), so the model does not see the sag. Magnitude: the drop at 1 MN of rope
+    pull with the dipper at th = 0, d = 8.5 m.
+    """
+
+    name = "boom_suspension_spring"
+    default_magnitude = 0.75
+    magnitude_unit = "deg (boom drop at 1 MN rope pull)"
+    description = "boom angle moving with the rope load"
+    typical_range = (0.5, 1.5)
+    iterations = 3
+
+    @staticmethod
+    def _moment(th: np.ndarray, d: np.ndarray, boom: np.ndarray, tension: np.ndarray,
+                l_bs: float) -> np.ndarray:
+        b = _sheave(boom, l_bs)
+        foot = -BOOM_FOOT_BELOW_SHAFT_M * np.stack([np.cos(boom), np.sin(boom)], axis=-1)
+        to_bail = _bail(th, d) - b
+        to_drum = DRUM_XY[None, :] - b
+        f = tension[:, None] * (to_bail / np.linalg.norm(to_bail, axis=1, keepdims=True)
+                                + to_drum / np.linalg.norm(to_drum, axis=1, keepdims=True))
+        arm = b - foot
+        return arm[:, 0] * f[:, 1] - arm[:, 1] * f[:, 0]
+
+    def before_dynamics(self, ctx: dict[str, Any]) -> None:
+        from shoveld.sim.plant import Plant
+
+        m, pp = ctx["motion"], ctx["params"]
+        one = np.ones(1)
+        ref = self._moment(0.0 * one, 8.5 * one, np.radians(pp.boom_deg) * one, 1e6 * one,
+                           pp.l_bs)[0]
+        compliance = np.radians(self.magnitude) / abs(ref)
+        others = [e for e in ctx.get("effects", []) if e is not self]
+        boom = m.boom
+        for _ in range(self.iterations):
+            sub = Plant(pp, [*others, _FixedBoom(boom)]).run(m)
+            boom = m.boom + compliance * self._moment(m.th, m.d, boom, sub["rope_force"],
+                                                      pp.l_bs)
+        ctx["boom_true"] = boom

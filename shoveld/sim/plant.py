@@ -191,7 +191,7 @@ class Plant:
         """Currents and field currents (true, noise-free) for the prescribed motion."""
         pp = self.p
         dt = float(motion.t[1] - motion.t[0])
-        ctx = PlantContext(motion=motion, params=pp, dt=dt)
+        ctx = PlantContext(motion=motion, params=pp, dt=dt, effects=self.effects)
         for e in self.effects:
             e.before_dynamics(ctx)
         th, d, boom = motion.th, motion.d, ctx.get("boom_true", motion.boom)
