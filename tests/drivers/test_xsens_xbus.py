@@ -35,7 +35,7 @@ def test_message_ids_match_vendor_values() -> None:
 
 
 def test_encoder_matches_documented_examples() -> None:
-    # MTi user manual: ReqDID = FA FF 00 00 01, GoToConfig = FA FF 30 00 D1.
+    # ReqDID = FA FF 00 00 01 is the MTi user manual's example; the rest follow its rule.
     assert encode_frame(MID.REQ_DID) == bytes.fromhex("faff000001")
     assert encode_frame(MID.GOTO_CONFIG) == bytes.fromhex("faff3000d1")
     assert encode_frame(MID.GOTO_MEASUREMENT) == bytes.fromhex("faff1000f1")
