@@ -48,7 +48,7 @@ def main(argv: list[str] | None = None) -> None:
     out: list[object] = []
     t0 = time.perf_counter()
     for c in chunks:
-        drv._parse(c, out.append)
+        drv._parse(c, out.append, 0.0)
     dt = time.perf_counter() - t0
     print(f"driver parse (chunks): {args.lines / dt:12,.0f} lines/s  "
           f"({len(out)} readings, {drv.health.bad_frames} bad lines, "

@@ -302,7 +302,7 @@ class Ar4000Driver(Driver):
         deadline = time.monotonic() + cfg.answer_timeout_s
         while time.monotonic() < deadline:
             data = self._ser.read(max(1, self._ser.in_waiting))
-            if data and self._parse(data, self._pending.append):
+            if data and self._parse(data, self._pending.append, self.clock()):
                 self._last_good = self.clock()
                 self.health.extra["silent"] = False
                 return
@@ -321,12 +321,15 @@ class Ar4000Driver(Driver):
 
     # -- parsing -----------------------------------------------------------------------
 
-    def _parse(self, data: bytes, out: Callable[[Reading], None]) -> int:
-        """Parse a chunk; hand readings to ``out``; return how many lines were good."""
+    def _parse(self, data: bytes, out: Callable[[Reading], None], now: float) -> int:
+        """Parse a chunk received at ``now``; hand readings to ``out``; count good lines.
+
+        Every line completed by the chunk is stamped with the chunk's receive time
+        (taken right after the read, so a busy parser thread does not delay it).
+        """
         cfg = self.config
         good = 0
         for line in self._splitter.feed(data):
-            now = self.clock()
             value = parse_line(line, cfg.unit_m)
             if value is None:
                 if line.strip():
@@ -371,8 +374,9 @@ class Ar4000Driver(Driver):
             data = ser.read(max(1, ser.in_waiting))
         except Exception as e:  # noqa: BLE001 - unplugged USB adapter etc.
             raise DeviceError(f"AR4000 read failed on {self.config.port}: {e}") from e
-        if data and self._parse(data, lambda r: self.emit(sink, r)):
-            self._last_good = self.clock()
+        t_rx = self.clock()
+        if data and self._parse(data, lambda r: self.emit(sink, r), t_rx):
+            self._last_good = t_rx
             self.health.extra["silent"] = False
             return
         quiet = self.clock() - self._last_good

@@ -392,6 +392,9 @@ class _ModbusFeeder:
         self.server = RegisterServer(self.provider, transport=transport,
                                      baudrate=int(cfg.get("baudrate", 19200)))
         self.server.on_request = self._on_request
+        # a recorded timeout is replayed as silence; the client then waits its timeout
+        # in real time, during which a stepped clock must not run ahead
+        self.server.drop_hold_s = float(cfg.get("timeout_s", 0.1)) + 0.01
         self.endpoint = ModbusEndpoint(entry.name, entry.kind)
         self._served_t = -1.0
         self._seen: tuple[float, float] = (-1.0, 0.0)
@@ -413,7 +416,7 @@ class _ModbusFeeder:
     def settled(self, t: float) -> bool:
         if self._seen[0] != t:
             self._seen = (t, time.monotonic())
-        if self.server.in_flight:
+        if self.server.in_flight or time.monotonic() < self.server.hold_until:
             return False
         return self._served_t >= t or time.monotonic() - self._seen[1] > self.quiet_s
 
@@ -438,6 +441,24 @@ class ReplaySession:
             f.exhausted for f in self._feeders) and all(
             f.settled(self.clock.now()) for f in self._feeders
             if isinstance(f, _SerialFeeder))
+
+    def wait_connected(self, drivers: list[Any], timeout_s: float = 5.0,
+                       step_s: float = 0.005) -> bool:
+        """Wait until every driver reports ``health.connected``.
+
+        Stepped clock: meanwhile advance it at about real-time pace (``step_s`` per
+        ``step_s`` of real time), because drivers need data to flow to finish their
+        handshake, but racing ahead would stream past them while they connect.
+        Call it after starting the driver threads, before a fast loop.
+        """
+        end = time.monotonic() + timeout_s
+        while time.monotonic() < end:
+            if all(d.health.connected for d in drivers):
+                return True
+            if self.clock.stepped:
+                self.clock.advance(step_s)
+            time.sleep(step_s)
+        return all(d.health.connected for d in drivers)
 
     def driver_config(self, name: str) -> dict[str, Any]:
         """The device's recorded driver config, re-pointed at its replay endpoint."""

@@ -281,6 +281,7 @@ class ModbusAdcDriver(Driver):
         invalid: set[str] = set()
         chh: dict[str, dict[str, Any]] = self.health.extra["channels"]
         answered = False
+        t = self.clock()
         for address, count, chans in self._blocks:
             words, err, code = self._read_block(address, count)
             t = self.clock()
@@ -314,7 +315,7 @@ class ModbusAdcDriver(Driver):
                 else:
                     h["exceptions"] += 1
                     h["last_error"] = f"Modbus exception code {code}"
-        now = self.clock()
+        now = t  # receive time of the last block, taken right after its answer
         for ch in c.channels:
             h = chh[ch.name]
             h["stale"] = h["last_ok_t"] is None or now - h["last_ok_t"] > c.stale_after_s

@@ -16,6 +16,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import threading
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -61,6 +62,10 @@ class RegisterServer:
         self.in_flight = False
         self.last_request_t: float | None = None
         self.on_request: Callable[[int, int, int], None] | None = None
+        self.drop_hold_s = 0.0
+        """After dropping an answer, ``hold_until`` is set this far ahead (the client's
+        timeout): replay keeps a stepped clock still while the client waits it out."""
+        self.hold_until = 0.0
         self._drop_next = False
         self._loop: asyncio.AbstractEventLoop | None = None
         self._server: Any = None
@@ -103,9 +108,11 @@ class RegisterServer:
             self.in_flight = False
             if self._drop_next or self.silent:
                 self._drop_next = False
+                self.hold_until = time.monotonic() + self.drop_hold_s
                 return b""
         else:
             self.in_flight = True
+            self.hold_until = 0.0
         return data
 
     # -- lifecycle -----------------------------------------------------------------------

@@ -50,7 +50,7 @@ def test_driver_parse_of_garbage_emits_only_good_distances(chunks: list[bytes]) 
     drv = Ar4000Driver("laser", Ar4000Config(port="/dev/null"))
     out = []
     for c in chunks:
-        drv._parse(c, out.append)
+        drv._parse(c, out.append, 0.0)
     for r in out:
         if r.invalid:
             assert r.values == {}
