@@ -75,13 +75,19 @@ class Assembler:
         self.new_arrivals = []
         for name, dev in self.devices.items():
             self._device(t, name, dev, values, invalid)
-        for k, v in list(values.items()):
-            col = BY_NAME.get(k)
-            if k not in invalid and col is not None and not (col.lo <= v <= col.hi):
-                invalid.add(k)
-            if k in invalid:
-                values[k] = math.nan
+        for k in invalid:
+            values[k] = math.nan
         return Sample(time_s=t, **values, invalid=frozenset(invalid))
+
+    @staticmethod
+    def _set(signal: str, v: float, values: dict[str, float], invalid: set[str]) -> None:
+        """Record a value, or mark it invalid when it is outside the column's range
+        (a unit or scaling mistake, a broken transducer)."""
+        col = BY_NAME[signal]
+        if math.isnan(v) or not (col.lo <= v <= col.hi):
+            invalid.add(signal)
+        else:
+            values[signal] = v
 
     # -- per device -----------------------------------------------------------------------
     def _device(self, t: float, name: str, dev: DeviceConfig, values: dict[str, float],
@@ -131,22 +137,16 @@ class Assembler:
              fn: Callable[[float], float] | None, values: dict[str, float],
              invalid: set[str]) -> None:
         v = self._raw(t, b, a, key)
-        if math.isnan(v):
-            invalid.add(signal)
-            return
-        values[signal] = fn(v) if fn is not None else v
+        self._set(signal, fn(v) if fn is not None and not math.isnan(v) else v, values, invalid)
 
     def _mti(self, t: float, b: Stored, a: Stored | None, values: dict[str, float],
              invalid: set[str]) -> None:
         pitch = self._raw(t, b, a, "pitch_deg")
-        if math.isnan(pitch):
-            invalid.add("handle_deg")
-        else:
-            values["handle_deg"] = self.inst.handle_deg(pitch)
+        self._set("handle_deg", self.inst.handle_deg(pitch), values, invalid)
         yaw = self._raw(t, b, a, "yaw_deg")
         if math.isnan(yaw):
             invalid.add("swing_deg")
         else:
             sw = unwrap_deg(self._swing_prev, self.inst.swing_deg(yaw))
             self._swing_prev = sw
-            values["swing_deg"] = sw
+            values["swing_deg"] = sw  # unwrapped: a count of turns, not range-checked

@@ -1,0 +1,118 @@
+"""The configuration file: the example is valid, and every mistake names its key."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+from shoveld.cli import main
+from shoveld.daemon.config import ConfigError, check_params, load_config
+
+from .conftest import PARAMS, ROOT
+
+EXAMPLE = ROOT / "examples" / "shoveld.toml"
+
+
+@pytest.fixture
+def example(tmp_path: Path) -> Path:
+    """The example config next to a params file, so it validates completely."""
+    p = tmp_path / "shoveld.toml"
+    shutil.copy(EXAMPLE, p)
+    shutil.copy(PARAMS, tmp_path / "params.toml")
+    return p
+
+
+def edit(path: Path, old: str, new: str) -> Path:
+    text = path.read_text()
+    assert old in text, old
+    path.write_text(text.replace(old, new, 1))
+    return path
+
+
+def test_example_config_is_valid(example: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    cfg = load_config(example)
+    assert cfg.shovel_id == "shovel-07" and cfg.loop.rate_hz == 100.0
+    assert cfg.params_path == example.parent / "params.toml"
+    assert cfg.zenoh.mode == "client" and cfg.zenoh.connect
+    assert cfg.engine.rate_hz == 100.0 and cfg.engine.truck_target_kg == 136000.0
+    assert set(cfg.devices) == {"mti", "laser", "adc_motors", "adc_incl"}
+    assert cfg.devices["mti"].max_age_s == 0.1
+    assert "max_age_s" not in cfg.devices["mti"].driver  # daemon key, not the driver's
+    assert cfg.devices["adc_incl"].signals == ("boom_deg", "roll_deg", "pitch_deg")
+    check_params(cfg)
+    assert main(["check-config", str(example)]) == 0
+    out = capsys.readouterr().out
+    assert "OK" in out and "adc_motors (modbus_tcp" in out
+
+
+def test_defaults_peer_on_loopback(tmp_path: Path) -> None:
+    text = EXAMPLE.read_text()
+    head, rest = text.split("\n[zenoh]", 1)
+    p = tmp_path / "c.toml"
+    p.write_text(head.replace('"params.toml"', f'"{PARAMS}"') + "[installation]"
+                 + rest.split("[installation]", 1)[1])
+    cfg = load_config(p)
+    assert cfg.zenoh.mode == "peer" and cfg.zenoh.listen == ("tcp/127.0.0.1:7447",)
+    assert not cfg.zenoh.multicast_scouting
+
+
+@pytest.mark.parametrize(("old", "new", "key"), [
+    ("rate_hz = 100.0", "rate_hz = 0.5", "loop.rate_hz"),
+    ("rate_hz = 100.0", 'rate_hz = "fast"', "loop.rate_hz"),
+    ("max_age_s = 0.25", "max_age_seconds = 0.25", "loop.max_age_seconds"),
+    ('id = "shovel-07"', 'id = "shovel/07"', "shovel.id"),
+    ('mode = "client"', 'mode = "router2"', "zenoh.mode"),
+    ('connect = ["tcp/10.20.0.2:7447", "tcp/10.20.0.3:7447"]', "connect = []", "zenoh.connect"),
+    ('connect = ["tcp/10.20.0.2:7447",', 'connect = ["10.20.0.2:7447",', "zenoh.connect"),
+    ("target_kg = 136000.0", "target_kg = -1", "truck.target_kg"),
+    ("crowd_offset_m = 5.88", "crowd_offset = 5.88", "installation.crowd_offset"),
+    ("max_age_s = 0.1", "max_age_s = 0", "devices.mti.max_age_s"),
+    ('kind = "mti_serial"', 'kind = "mti"', "devices.mti.kind"),
+    ("rate_hz = 100\n", "rate_hz = 100\nbaud = 9600\n", "baud"),
+    ('{ name = "hoist1_a", register = 0', '{ name = "hoist_1", register = 0', "hoist_1"),
+    ('{ name = "hoist1_a", register = 0, scale = 400.0 },\n', "", "hoist1_a"),
+    ('{ name = "boom_deg"', '{ name = "crowd_a"', "crowd_a"),
+])
+def test_bad_config_names_the_key(example: Path, old: str, new: str, key: str,
+                                  capsys: pytest.CaptureFixture[str]) -> None:
+    edit(example, old, new)
+    with pytest.raises(ConfigError, match=key.replace(".", r"\.")):
+        load_config(example)
+    assert main(["check-config", str(example)]) == 2
+    err = capsys.readouterr().err
+    assert key in err and str(example) in err
+
+
+def test_engine_sections_and_params_errors(example: Path) -> None:
+    edit(example, "[zenoh]", "[engine]\nmin_samples = 30\n[engine.phases]\ntuck_deg = -20.0\n"
+                             "[engine.rls]\nprior_kg = 10000.0\n\n[zenoh]")
+    cfg = load_config(example)
+    assert cfg.engine.min_samples == 30 and cfg.engine.phases.tuck_deg == -20.0
+    assert cfg.engine.rls.prior_kg == 10000.0
+    edit(example, "tuck_deg = -20.0", "tuck = -20.0")
+    with pytest.raises(ConfigError, match=r"engine\.phases\.tuck"):
+        load_config(example)
+    edit(example, "tuck = -20.0", "tuck_deg = -20.0")
+    (example.parent / "params.toml").write_text("format = 'x'\n")
+    cfg = load_config(example)
+    with pytest.raises(ConfigError, match=r"shovel\.params"):
+        check_params(cfg)
+
+
+def test_run_refuses_to_start_with_a_bad_config(example: Path,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    edit(example, "rate_hz = 100.0", "rate_hz = -3")
+    assert main(["run", "--config", str(example)]) == 2
+    err = capsys.readouterr().err
+    assert "refusing to start" in err and "loop.rate_hz" in err
+
+
+def test_unreadable_and_invalid_toml(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="cannot read"):
+        load_config(tmp_path / "missing.toml")
+    p = tmp_path / "bad.toml"
+    p.write_text("[shovel\n")
+    with pytest.raises(ConfigError, match="not valid TOML"):
+        load_config(p)

@@ -1,0 +1,82 @@
+"""The fixed-rate loop: absolute deadlines, no drift, overruns counted, grid kept."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+
+from shoveld.daemon.clock import MonotonicClock, SimClock
+from shoveld.daemon.loop import FixedRateLoop
+
+
+def test_ticks_on_absolute_deadlines_without_drift() -> None:
+    clock = SimClock(5.0)
+    ticks: list[float] = []
+    loop = FixedRateLoop(clock, 100.0, ticks.append)
+    loop.run(threading.Event(), max_ticks=100_000)
+    assert len(ticks) == 100_000
+    # tick k is exactly t0 + k / rate (no accumulated rounding of a period sum)
+    assert ticks[-1] == pytest.approx(5.0 + 99_999 / 100.0, abs=1e-9)
+    assert ticks[12345] == 5.0 + 12345 * 0.01
+    assert loop.stats.overruns == 0 and loop.stats.skipped == 0
+
+
+def test_overruns_are_counted_and_the_grid_is_kept() -> None:
+    work = {3: 0.025, 7: 0.0105}  # tick 3 overruns two periods, tick 7 just one
+    clock = SimClock(0.0)
+    ticks: list[float] = []
+
+    def tick(t: float) -> None:
+        ticks.append(t)
+        clock._t += work.get(len(ticks) - 1, 0.001)
+
+    loop = FixedRateLoop(clock, 100.0, tick)
+    loop.run(threading.Event(), max_ticks=12)
+    assert loop.stats.overruns == 2
+    assert loop.stats.skipped == 1  # after tick 3 (ends 0.056) the 0.04 and 0.05 are late
+    # every tick stays on the 10 ms grid
+    assert all(abs(t * 100 - round(t * 100)) < 1e-9 for t in ticks)
+    assert 0.05 in [round(t, 6) for t in ticks] and 0.04 not in [round(t, 6) for t in ticks]
+
+
+def test_done_and_stop_end_the_loop() -> None:
+    clock = SimClock(0.0)
+    n = []
+    loop = FixedRateLoop(clock, 50.0, lambda t: n.append(t))
+    loop.run(threading.Event(), done=lambda: len(n) >= 7)
+    assert len(n) == 7
+    stop = threading.Event()
+    stop.set()
+    loop.run(stop)
+    assert len(n) == 7
+
+
+def test_live_clock_keeps_its_rate() -> None:
+    """Half a second at 100 Hz on the host clock: about 50 ticks, small lateness."""
+    clock = MonotonicClock()
+    ticks: list[float] = []
+    loop = FixedRateLoop(clock, 100.0, ticks.append)
+    stop = threading.Event()
+    t0 = time.monotonic()
+    threading.Timer(0.5, stop.set).start()
+    loop.run(stop)
+    elapsed = time.monotonic() - t0
+    assert abs(len(ticks) - 100 * elapsed) <= 3
+    d = loop.stats.as_dict(100.0)
+    assert d["jitter_ms"]["p50"] < 2.0  # generous: the machine is shared with other tests
+    assert clock.wall(clock.now()) == pytest.approx(time.time(), abs=0.01)
+
+
+def test_stop_wakes_a_sleeping_live_loop() -> None:
+    clock = MonotonicClock()
+    loop = FixedRateLoop(clock, 0.2, lambda t: None)  # a 5 s period
+    stop = threading.Event()
+    th = threading.Thread(target=loop.run, args=(stop,))
+    th.start()
+    time.sleep(0.1)
+    t0 = time.monotonic()
+    stop.set()
+    th.join(2)
+    assert not th.is_alive() and time.monotonic() - t0 < 0.5

@@ -1,0 +1,111 @@
+"""The pass log: WAL, durable writes, restore of the current truck, export."""
+
+from __future__ import annotations
+
+import sqlite3
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from shoveld.cli import main
+from shoveld.cli.passes import parse_when
+from shoveld.daemon.persist import PassLog, db_path, read_passes
+
+
+def p(n: int, truck: int, kg: float = 30000.0, valid: bool = True) -> dict[str, Any]:
+    return {"pass": n, "truck": truck, "start_s": 10.0 * n, "end_s": 10.0 * n + 8,
+            "payload_kg": kg if valid else None, "std_kg": 200.0 if valid else None,
+            "samples": 300 if valid else 3, "valid": valid,
+            "reason": "" if valid else "only 3 valid samples"}
+
+
+T0 = 1_790_000_000.0
+
+
+def test_wal_and_restore_of_the_open_truck(tmp_path: Path) -> None:
+    log = PassLog(db_path(tmp_path), "s1")
+    assert log.con.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+    assert log.con.execute("PRAGMA synchronous").fetchone()[0] == 2  # FULL
+    r = log.restore()
+    assert (r.next_pass, r.truck, r.truck_passes, r.last_dump_unix) == (1, 1, [], None)
+    log.write_pass(p(1, 1), T0, T0 + 8, 136000.0)
+    log.write_pass(p(2, 1, valid=False), T0 + 10, T0 + 18, 136000.0)
+    log.close()
+    r = PassLog(db_path(tmp_path), "s1").restore()
+    assert r.next_pass == 3 and r.truck == 1 and r.last_dump_unix == T0 + 18
+    assert [x["pass"] for x in r.truck_passes] == [1, 2]
+    assert r.truck_passes[1]["valid"] is False and r.truck_passes[1]["payload_kg"] is None
+
+
+def test_closed_truck_starts_the_next_one(tmp_path: Path) -> None:
+    log = PassLog(db_path(tmp_path), "s1")
+    for n in (1, 2):
+        log.write_pass(p(n, 1), T0 + n, T0 + n + 0.5, 62000.0)
+    log.close_truck(1, 62000.0, T0 + 5)
+    r = log.restore()
+    assert r.next_pass == 3 and r.truck == 2 and r.truck_passes == []
+    assert log.closed_truck_totals(T0) == [(1, 60000.0, 62000.0)]
+    log.write_pass(p(3, 2), T0 + 30, T0 + 31, 62000.0)
+    r = log.restore()
+    assert r.truck == 2 and [x["pass"] for x in r.truck_passes] == [3]
+
+
+def test_a_pass_is_never_written_twice(tmp_path: Path) -> None:
+    log = PassLog(db_path(tmp_path), "s1")
+    assert log.write_pass(p(1, 1), T0, T0 + 1, 62000.0)
+    assert not log.write_pass(p(1, 1, kg=1.0), T0, T0 + 1, 62000.0)
+    rows = read_passes(db_path(tmp_path))
+    assert len(rows) == 1 and rows[0]["payload_kg"] == 30000.0
+    assert not log.con.in_transaction
+
+
+def test_readers_work_while_the_writer_holds_the_log(tmp_path: Path) -> None:
+    log = PassLog(db_path(tmp_path), "s1")
+    log.write_pass(p(1, 1), T0, T0 + 1, 62000.0)
+    log.con.execute("BEGIN IMMEDIATE")
+    log.con.execute("INSERT INTO meta(key, value) VALUES ('x', 'y')")
+    assert len(read_passes(db_path(tmp_path))) == 1  # WAL: readers do not wait
+    log.con.execute("ROLLBACK")
+    with pytest.raises(FileNotFoundError):
+        read_passes(tmp_path / "nope.sqlite")
+
+
+def test_passes_export(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    log = PassLog(db_path(tmp_path), "s7")
+    for n, (truck, kg) in enumerate([(1, 30000.0), (1, 31000.0), (2, 40000.0)], start=1):
+        log.write_pass(p(n, truck, kg), T0 + 100 * n, T0 + 100 * n + 20, 62000.0)
+    log.close_truck(1, 62000.0, T0 + 250)
+    log.write_pass(p(4, 2, valid=False), T0 + 400, T0 + 420, 62000.0)
+    log.close()
+    assert main(["passes", "--state-dir", str(tmp_path), "--csv"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0] == "pass,truck,shovel,start,end,payload_kg,std_kg,samples,valid,reason"
+    assert len(out) == 5 and out[1].startswith("1,1,s7,") and ",30000.0,200.0,300,1," in out[1]
+    assert out[4].endswith(",,,3,0,only 3 valid samples")
+    assert main(["passes", "--db", str(db_path(tmp_path)), "--since", str(T0 + 250)]) == 0
+    text = capsys.readouterr().out
+    assert "pass     3" in text and "pass     1" not in text
+    assert "truck    2: 2 passes" in text and "(open)" in text
+    assert main(["passes", "--state-dir", str(tmp_path)]) == 0
+    text = capsys.readouterr().out
+    assert "10/10/20 over 1 closed trucks" in text
+    assert main(["passes", "--state-dir", str(tmp_path / "empty")]) == 2
+    assert "no pass log" in capsys.readouterr().err
+
+
+def test_parse_when() -> None:
+    now = 1_800_000_000.0
+    assert parse_when("12h", now) == now - 12 * 3600
+    assert parse_when("30m", now) == now - 1800
+    assert parse_when("1790000000", now) == 1_790_000_000.0
+    assert parse_when("2026-11-21T18:00:00+00:00", now) == 1795284000.0
+    with pytest.raises(Exception, match="cannot read time"):
+        parse_when("yesterday-ish", now)
+
+
+def test_database_is_plain_sqlite(tmp_path: Path) -> None:
+    PassLog(db_path(tmp_path), "s1").write_pass(p(1, 1), T0, T0 + 1, 62000.0)
+    con = sqlite3.connect(db_path(tmp_path))
+    assert con.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
+    assert con.execute("SELECT count(*) FROM passes").fetchone()[0] == 1
