@@ -204,10 +204,14 @@ class ModbusAdcDriver(Driver):
     def __init__(self, name: str, config: ModbusAdcConfig,
                  clock: Callable[[], float] = time.monotonic,
                  backoff_s: tuple[float, float] = (0.2, 5.0),
-                 register_log: Callable[[RegisterRead], None] | None = None) -> None:
+                 register_log: Callable[[RegisterRead], None] | None = None,
+                 client_factory: Callable[[ModbusAdcConfig], Any] | None = None) -> None:
         super().__init__(name, clock, backoff_s)
         self.config = config
         self.register_log = register_log
+        self.client_factory = client_factory
+        """Builds the pymodbus-like client (default: TCP or serial client from the
+        config); in-memory replays and tests pass their own."""
         self._blocks = config.channels.blocks(config.max_gap)
         self._client: Any = None
         self._next_poll: float | None = None
@@ -223,6 +227,8 @@ class ModbusAdcDriver(Driver):
 
     def _make_client(self) -> Any:
         c = self.config
+        if self.client_factory is not None:
+            return self.client_factory(c)
         if c.transport == "tcp":
             return ModbusTcpClient(c.host, port=int(c.port), timeout=c.timeout_s,
                                    retries=c.retries)
