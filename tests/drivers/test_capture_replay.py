@@ -20,7 +20,7 @@ from drivers.capture.replay import ReplaySession, open_replay
 from drivers.modbus_adc import ChannelMap, ModbusAdcDriver
 from hil_fixtures.ar4000 import Ar4000Emulator
 from hil_fixtures.modbus_adc import ModbusAdcEmulator
-from hil_fixtures.virtual_shovel import MOTOR_CHANNELS, DriverRunner
+from hil_fixtures.virtual_shovel import INCLINOMETER_CHANNELS, MOTOR_CHANNELS, DriverRunner
 from shoveld.installation import Installation
 from shoveld.signals import SignalsTable
 
@@ -265,3 +265,30 @@ def test_make_capture_from_a_signals_table(tmp_path: Path) -> None:
     assert len(got["laser"]) > 0.9 * len(err)
     got_h = {round(r.values["hoist1_a"], 6) for r in got["adc_motors"] if r.values}
     assert len(got_h) > 50 and got_h <= {round(h, 6) for h in hoist}
+
+
+def test_virtual_shovel_with_can_mti_and_rtu_modules(tmp_path: Path) -> None:
+    """Every emulator from one table on one clock; the recorder's drivers read them all."""
+    pytest.importorskip("hil_fixtures.mti_can")
+    from drivers.capture.clock import ReplayClock
+    from hil_fixtures.virtual_shovel import VirtualShovel
+
+    t = np.arange(0.0, 3.0, 0.02)
+    table = SignalsTable.from_arrays(
+        time_s=t, handle_deg=np.full_like(t, 12.0), crowd_m=np.full_like(t, 8.0),
+        swing_deg=np.full_like(t, 30.0), boom_deg=np.full_like(t, 45.0),
+        hoist1_a=np.full_like(t, 2000.0), roll_deg=np.full_like(t, 1.5))
+    clock = ReplayClock(0.0, speed=2.0)
+    with VirtualShovel(table, clock=clock, mti="can", adc_transport="rtu") as vs:
+        cfg = vs.config()
+        assert cfg["devices"]["adc_motors"]["kind"] == "modbus_rtu"
+        summary = Recorder(cfg, tmp_path / "c", clock=clock).run(1.5)
+    assert all(d["readings"] > 20 for d in summary.values()), summary
+    cap = read_capture(tmp_path / "c")
+    assert any(m.arbitration_id == 0x22 for _, m in cap.can_messages("mti"))  # EulerAngles
+    reads = [r for r in cap.modbus_reads("adc_motors") if r.registers]
+    assert MOTOR_CHANNELS.decode(0, reads[-1].registers)["hoist1_a"] == pytest.approx(
+        2000.0, abs=0.2)
+    incl = [r for r in cap.modbus_reads("adc_incl") if r.registers]
+    assert INCLINOMETER_CHANNELS.decode(0, incl[-1].registers)["roll_deg"] == pytest.approx(
+        1.5, abs=0.01)
