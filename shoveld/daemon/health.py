@@ -87,7 +87,7 @@ def problems(drivers: Mapping[str, dict[str, Any]], loop: dict[str, Any],
         elif st == "no_data":
             out.append(f"{name}: no data yet")
         elif st == "stale":
-            out.append(f"{name}: no reading for {d.get('age_s')} s")
+            out.append(f"{name}: no reading for {d.get('age_s') or 0:.2f} s")
         elif st == "invalid":
             out.append(f"{name}: invalid {', '.join(d.get('invalid_signals', []))}")
         if d.get("babbling"):

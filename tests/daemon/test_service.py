@@ -1,0 +1,170 @@
+"""The service from readings to Zenoh, fed from a table on a simulated clock."""
+
+from __future__ import annotations
+
+import dataclasses
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from shoveld.daemon.tablefeed import Fault, table_service
+from shoveld.engine.loop import EngineConfig
+from shoveld.engine.offline import estimate_table
+from shoveld.model.params import ModelParams
+from shoveld.signals.table import SignalsTable
+
+from .conftest import Collector, free_port, make_cfg
+
+
+def run_table(tmp_path: Path, table: SignalsTable, params: ModelParams, port: int,
+              faults: list[Fault] | None = None, collector: Collector | None = None,
+              max_ticks: int | None = None, close_truck: bool = True) -> Any:
+    cfg = make_cfg(tmp_path, port)
+    svc, feed = table_service(table, cfg, params, faults=faults,
+                              close_truck_at_end=close_truck)
+    svc.start(zenoh_wait_s=5.0)
+    if collector is not None:
+        time.sleep(0.5)  # let the subscriber's declaration reach the daemon
+    svc.run(threading.Event(), done=lambda: feed.finished, max_ticks=max_ticks)
+    svc.flush()
+    return svc
+
+
+def test_table_through_the_service_to_zenoh(tmp_path: Path, e2e_table: SignalsTable,
+                                            params: ModelParams,
+                                            collector_factory: Any) -> None:
+    port = free_port()
+    cfg = make_cfg(tmp_path, port)
+    svc, feed = table_service(e2e_table, cfg, params, close_truck_at_end=True)
+    svc.start(zenoh_wait_s=5.0)
+    col = collector_factory(f"tcp/127.0.0.1:{port}")
+    try:
+        time.sleep(0.5)
+        # before anything happened: alive token and a status answer
+        alive = [str(r.ok.key_expr) for r in col.session.liveliness().get("shovel/*/alive",
+                                                                         timeout=2.0)]
+        assert alive == ["shovel/t1/alive"]
+        svc.run(threading.Event(), done=lambda: feed.finished)
+        svc.flush()
+        assert col.wait(lambda: len(col.of("truck")) >= 4 and len(col.of("pass")) >= 3)
+        replies = list(col.session.get("shovel/t1/status", timeout=2.0))
+    finally:
+        svc.close()
+    # passes: the engine's on the same table (at its own 50 Hz) within 1.5 %
+    est = estimate_table(e2e_table, params, EngineConfig(truck_target_kg=62000.0))
+    passes = col.of("pass")
+    assert [(p["pass"], p["truck"]) for p in passes] == [(1, 1), (2, 1), (3, 2)]
+    for got, want in zip(passes, est.passes, strict=True):
+        assert got["valid"] and got["payload_kg"] == pytest.approx(want.payload_kg, rel=0.015)
+        assert set(got) >= {"pass", "truck", "payload_kg", "std_kg", "start", "end"}
+        assert got["end"] - got["start"] == pytest.approx(want.end_s - want.start_s, abs=0.5)
+    closed = [t for t in col.of("truck") if t["closed"]]
+    assert [(t["truck"], t["passes"]) for t in closed] == [(1, 2), (2, 1)]
+    assert closed[0]["total_kg"] == pytest.approx(est.trucks[0].total_kg, rel=0.015)
+    assert closed[0]["status"] == "ok" and closed[1]["status"] == "under"
+    assert closed[1]["rule_10_10_20"]["trucks"] == 2
+    assert closed[1]["target_kg"] == 62000.0
+    # every message is JSON with its encoding; the other topics carry their fields
+    assert {enc for _, _, enc in col.samples} == {"application/json"}
+    j = col.of("joints")
+    assert len(j) > 500 and set(j[-1]) >= {"time", "swing_deg", "handle_deg", "crowd_m",
+                                            "boom_deg"}
+    live = col.of("payload/live")
+    assert {m["phase"] for m in live} >= {"dig", "lift", "swing", "dump"}
+    assert all(set(m) >= {"time", "payload_kg", "std_kg", "phase", "valid"} for m in live)
+    assert any(m["valid"] and m["payload_kg"] for m in live)
+    h = col.of("health")[-1]
+    assert set(h["drivers"]) == {"mti", "laser", "adc_motors", "adc_incl"}
+    assert {"connected", "rate_hz", "age_s", "bad_frames", "timeouts"} <= set(h["drivers"]["mti"])
+    assert {"rate_hz", "overruns", "ticks"} <= set(h["loop"])
+    st = replies[0].ok
+    assert str(st.encoding) == "application/json"
+    import json
+
+    status = json.loads(st.payload.to_bytes())
+    assert status["shovel"] == "t1" and status["last_pass"]["pass"] == 3
+
+
+def test_replay_on_a_simulated_clock_is_deterministic(tmp_path: Path, e2e_table: SignalsTable,
+                                                      params: ModelParams) -> None:
+    runs = []
+    for i in range(2):
+        got: list[dict[str, Any]] = []
+        cfg = make_cfg(tmp_path / str(i))
+        svc, feed = table_service(e2e_table, cfg, params, close_truck_at_end=True)
+        svc.on_event = lambda k, m, got=got: got.append({"topic": k, **m})
+        svc.start()
+        svc.run(threading.Event(), done=lambda feed=feed: feed.finished)
+        svc.flush()
+        svc.close()
+        runs.append(got)
+    assert len(runs[0]) == 9 and runs[0] == runs[1]
+
+
+def test_invalid_inputs_are_said_not_published_as_numbers(
+        tmp_path: Path, e2e_table: SignalsTable, params: ModelParams,
+        collector_factory: Any) -> None:
+    """The laser is silent through pass 1's lift and swing, the motor ADC disconnected
+    during pass 2: live says valid false, the passes are invalid, health names them."""
+    est = estimate_table(e2e_table, params, EngineConfig(truck_target_kg=62000.0))
+    p1, p2 = est.passes[0], est.passes[1]
+    faults = [Fault("laser", p1.start_s + 4.0, p1.end_s, "silent"),
+              Fault("adc_motors", p2.start_s + 4.0, p2.end_s, "disconnected")]
+    port = free_port()
+    cfg = dataclasses.replace(make_cfg(tmp_path, port))
+    svc, feed = table_service(e2e_table, cfg, params, faults=faults, close_truck_at_end=True)
+    svc.start(zenoh_wait_s=5.0)
+    col = collector_factory(f"tcp/127.0.0.1:{port}")
+    time.sleep(0.5)
+    try:
+        svc.run(threading.Event(), done=lambda: feed.finished)
+        svc.flush()
+        assert col.wait(lambda: len(col.of("pass")) >= 3)
+    finally:
+        svc.close()
+    passes = col.of("pass")
+    assert not passes[0]["valid"] and passes[0]["payload_kg"] is None
+    assert not passes[1]["valid"] and passes[1]["payload_kg"] is None
+    assert passes[2]["valid"] and passes[2]["payload_kg"] > 30000
+    t0 = svc.clock.wall(0.0)
+    during = [m for m in col.of("payload/live")
+              if p1.start_s + 5.0 < m["time"] - t0 < p1.end_s - 0.5]
+    assert during and all(m["payload_kg"] is None and not m["valid"] for m in during)
+    joints = [m for m in col.of("joints") if p1.start_s + 5.0 < m["time"] - t0 < p1.end_s - 0.5]
+    assert joints and all(m["crowd_m"] is None and "crowd_m" in m["invalid"] for m in joints)
+    problems = [p for h in col.of("health") for p in h["problems"]]
+    assert any(p.startswith("laser: no reading for") for p in problems)
+    assert any(p.startswith("adc_motors: disconnected") for p in problems)
+    # the truck total counts valid passes only, and says how many were invalid
+    closed = [t for t in col.of("truck") if t["closed"]]
+    assert closed[0]["invalid_passes"] == 2 and closed[0]["total_kg"] == 0.0
+
+
+def test_restart_restores_the_current_truck(tmp_path: Path, e2e_table: SignalsTable,
+                                            params: ModelParams) -> None:
+    """Stop after pass 2 (truck 1 still open), start again: the truck and the numbering
+    continue from the pass log."""
+    est = estimate_table(e2e_table, params, EngineConfig(truck_target_kg=62000.0))
+    stop_t = est.passes[1].end_s + 2.0
+    cfg = make_cfg(tmp_path)
+    svc, feed = table_service(e2e_table, cfg, params)
+    svc.start()
+    svc.run(threading.Event(), done=lambda: svc.clock.now() > stop_t)
+    svc.flush()
+    svc.close()
+    svc2, _ = table_service(e2e_table, cfg, params)
+    svc2.start()
+    try:
+        eng = svc2.engine
+        assert eng is not None and eng.pass_index == 2 and eng.truck.index == 1
+        assert [p["pass"] for p in eng.truck.passes] == [1, 2]
+        st = svc2.status()
+        assert st["truck"]["truck"] == 1 and st["truck"]["passes"] == 2
+        assert [p["pass"] for p in st["truck_passes"]] == [1, 2]
+        assert st["truck"]["total_kg"] == pytest.approx(
+            est.passes[0].payload_kg + est.passes[1].payload_kg, rel=0.015)
+    finally:
+        svc2.close()
