@@ -48,6 +48,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--mode", choices=("peer", "client"), default=None)
     p.add_argument("--zenoh-wait", type=float, default=2.0,
                    help="seconds to wait for the Zenoh session before playing")
+    p.add_argument("--until", type=float, default=None, metavar="S",
+                   help="stop at this capture time (seconds from its start)")
+    p.add_argument("--wait-subscribers", type=float, default=0.0, metavar="S",
+                   help="wait up to S seconds for a subscriber of the pass topic before "
+                        "playing (so it sees every pass)")
     p.add_argument("--keep-open", type=float, default=0.0, metavar="S",
                    help="stay on Zenoh this long after the end (late subscribers, queries)")
     p.add_argument("--json", action="store_true", help="JSON lines on stdout")
@@ -130,7 +135,10 @@ def run(args: argparse.Namespace) -> int:
         install_stop_signals(stop)
         try:
             rr.service.start(zenoh_wait_s=args.zenoh_wait)
-            figures = rr.run(stop)
+            if args.wait_subscribers > 0 and not rr.service.publisher.wait_subscribers(
+                    args.wait_subscribers):
+                log.warning("no subscriber after %.1f s; playing anyway", args.wait_subscribers)
+            figures = rr.run(stop, until_s=args.until)
             rr.service.flush()
             if args.keep_open > 0:
                 stop.wait(args.keep_open)

@@ -195,6 +195,20 @@ class Publisher:
         self.sent += 1
         return True
 
+    def matching(self, topic: str = "pass") -> bool:
+        """Whether any subscriber currently matches ``topic``."""
+        pub = self._pubs.get(topic)
+        if pub is None:
+            return False
+        try:
+            return bool(pub.matching_status.matching)
+        except Exception:  # noqa: BLE001
+            return False
+
+    def wait_subscribers(self, timeout_s: float, topic: str = "pass") -> bool:
+        """Wait until a subscriber matches ``topic`` (replays that must not start unseen)."""
+        return wait_until(lambda: self.matching(topic), timeout_s)
+
     def health(self) -> dict[str, Any]:
         d: dict[str, Any] = {"mode": self.cfg.mode, "open": self.connected, "sent": self.sent,
                              "dropped": self.dropped, "errors": self.errors,

@@ -36,8 +36,8 @@ class ReplayRun:
     session: Any
     speed: float | None
 
-    def run(self, stop: threading.Event | None = None, connect_timeout_s: float = 15.0
-            ) -> dict[str, Any]:
+    def run(self, stop: threading.Event | None = None, connect_timeout_s: float = 15.0,
+            until_s: float | None = None) -> dict[str, Any]:
         """Wait for the drivers, play the capture, close the last truck; return figures."""
         stop = stop or threading.Event()
         svc = self.service
@@ -51,7 +51,12 @@ class ReplayRun:
                         connect_timeout_s)
         t_cpu, t_real = time.process_time(), time.monotonic()
         t0 = svc.clock.now()
-        svc.run(stop, done=lambda: self.session.finished)
+        clock = svc.clock
+
+        def done() -> bool:
+            return bool(self.session.finished or (until_s is not None
+                                                  and clock.now() >= until_s))
+        svc.run(stop, done=done)
         real = time.monotonic() - t_real
         played = svc.clock.now() - t0
         return {"capture_s": round(played, 3), "real_s": round(real, 3),

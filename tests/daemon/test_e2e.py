@@ -1,0 +1,96 @@
+"""End to end: the committed capture, replayed through the daemon, on a Zenoh subscriber."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from shoveld.daemon.replay import replay_service
+from shoveld.model.params import ModelParams
+
+from .conftest import CAPTURE, PARAMS, Collector, free_port, make_cfg
+
+EXPECTED = json.loads((CAPTURE / "expected.json").read_text())
+
+
+def connect_when_up(endpoint: str, timeout: float = 20.0) -> Collector:
+    end = time.monotonic() + timeout
+    while True:
+        try:
+            return Collector(endpoint)
+        except Exception:  # noqa: BLE001 - zenoh.ZError until the daemon listens
+            if time.monotonic() > end:
+                raise
+            time.sleep(0.2)
+
+
+def check_passes(passes: list[dict[str, Any]], n: int | None = None, rel: float = 0.015
+                 ) -> None:
+    want = EXPECTED["passes"][:n]
+    assert [(p["pass"], p["truck"]) for p in passes] == [(w["pass"], w["truck"]) for w in want]
+    for got, w in zip(passes, want, strict=True):
+        assert got["valid"]
+        assert got["payload_kg"] == pytest.approx(w["payload_kg"], rel=rel)
+
+
+def test_committed_capture_gives_the_expected_passes_and_trucks(tmp_path: Path) -> None:
+    cfg = tmp_path / "e2e.toml"
+    cfg.write_text(f'[shovel]\nid = "e2e"\nparams = "{PARAMS}"\n\n[truck]\ntarget_kg = 62000.0\n')
+    port = free_port()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "shoveld", "replay", str(CAPTURE), "--fast", "--config", str(cfg),
+         "--state-dir", str(tmp_path / "state"), "--listen", f"tcp/127.0.0.1:{port}",
+         "--wait-subscribers", "15", "--keep-open", "1", "--json"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    col = None
+    try:
+        col = connect_when_up(f"tcp/127.0.0.1:{port}")
+        out, err = proc.communicate(timeout=90)
+        assert proc.returncode == 0, err
+        assert col.wait(lambda: len([t for t in col.of("truck") if t["closed"]]) >= 2, 5)
+        passes, trucks = col.of("pass"), col.of("truck")
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        if col is not None:
+            col.close()
+    check_passes(passes)
+    closed = [t for t in trucks if t["closed"]]
+    want = EXPECTED["trucks"]
+    assert [(t["truck"], t["passes"], t["status"]) for t in closed] == \
+        [(w["truck"], w["passes"], w["status"]) for w in want]
+    for got, w in zip(closed, want, strict=True):
+        assert got["total_kg"] == pytest.approx(w["total_kg"], rel=0.015)
+        assert got["target_kg"] == 62000.0
+    # the live topics ran too, and the replay says how fast it went
+    assert col.of("joints") and col.of("payload/live") and col.of("health")
+    figures = json.loads(out.strip().splitlines()[-1])
+    assert figures["topic"] == "replay" and figures["capture_s"] > 100
+    # the same passes are in the pass log, which 'shoveld passes' exports
+    csv = subprocess.run([sys.executable, "-m", "shoveld", "passes", "--state-dir",
+                          str(tmp_path / "state"), "--csv"], capture_output=True, text=True,
+                         check=True).stdout.splitlines()
+    assert len(csv) == 4 and csv[1].startswith("1,1,e2e,")
+
+
+def test_paced_replay_through_the_virtual_hardware(tmp_path: Path, params: ModelParams) -> None:
+    """The threaded path (ptys, a Modbus TCP server, driver threads) at 5x, first pass."""
+    cfg = make_cfg(tmp_path)
+    rr = replay_service(CAPTURE, cfg, params, speed=5.0)
+    got: list[dict[str, Any]] = []
+    rr.service.on_event = lambda k, m: got.append(m) if k == "pass" else None
+    try:
+        rr.service.start()
+        figures = rr.run(threading.Event(), until_s=EXPECTED["passes"][0]["end_s"] + 1.5)
+        rr.service.flush()
+    finally:
+        rr.close()
+    check_passes(got, 1, rel=0.02)
+    assert figures["speed_x"] > 3
