@@ -51,6 +51,10 @@ class ReplayClock:
         self._cond = threading.Condition()
         self._checks: list[SettleCheck] = []
         self._listeners: list[Callable[[], None]] = []
+        self._waiting: dict[int, float] = {}
+        self._busy: dict[int, float] = {}
+        self.busy_max_s = 0.2
+        """A released waiter that has not waited again after this long is not waited for."""
         self.unsettled_steps = 0
         """Steps whose settle checks did not all pass within ``settle_timeout_s``."""
 
@@ -98,12 +102,17 @@ class ReplayClock:
         with self._cond:
             if t > self._t:
                 self._t = float(t)
-            self._cond.notify_all()
             t = self._t
+            now_m = time.monotonic()
+            for ident, target in list(self._waiting.items()):
+                if target <= t:  # released: busy until it waits on the clock again
+                    del self._waiting[ident]
+                    self._busy[ident] = now_m
+            self._cond.notify_all()
         self._notify()
         deadline = time.monotonic() + self.settle_timeout_s
         while True:
-            if all(c(t) for c in self._checks):
+            if not self._waiters_busy() and all(c(t) for c in self._checks):
                 break
             if time.monotonic() > deadline:
                 self.unsettled_steps += 1
@@ -111,18 +120,41 @@ class ReplayClock:
             time.sleep(0.0002)
         return t
 
+    def _waiters_busy(self) -> bool:
+        """A thread released by the last advance has not come back to wait_until yet."""
+        with self._cond:
+            if not self._busy:
+                return False
+            old = time.monotonic() - self.busy_max_s
+            for ident, since in list(self._busy.items()):
+                if since < old:  # gone elsewhere (reconnecting, exited): stop waiting for it
+                    del self._busy[ident]
+            return bool(self._busy)
+
     def wait_until(self, t: float, timeout: float) -> bool:
-        """Block (at most ``timeout`` real seconds) until ``now() >= t``; True if reached."""
+        """Block (at most ``timeout`` real seconds) until ``now() >= t``; True if reached.
+
+        On a stepped clock a thread released here counts as *busy* (its work for the
+        step is running) until it calls ``wait_until`` again; ``advance`` waits for
+        that, so a driver's poll triggered by a step completes within the step.
+        """
+        me = threading.get_ident()
         end = time.monotonic() + timeout
         with self._cond:
+            self._busy.pop(me, None)
             while True:
                 now = self.now()
                 if now >= t:
+                    self._waiting.pop(me, None)
+                    if self.speed is None:
+                        self._busy[me] = time.monotonic()
                     return True
                 left = end - time.monotonic()
                 if left <= 0:
+                    self._waiting.pop(me, None)
                     return False
                 if self.speed is None:
+                    self._waiting[me] = t
                     self._cond.wait(left)
                 else:
                     self._cond.wait(min(left, (t - now) / self.speed))

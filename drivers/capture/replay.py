@@ -495,7 +495,7 @@ class ReplaySession:
 def open_replay(capture_dir: str | os.PathLike[str], speed: float | None = 1.0, *,
                 devices: list[str] | None = None,
                 responders: dict[str, Responder] | None = None, answer_window_s: float = 0.05,
-                settle_timeout_s: float = 0.5, modbus_quiet_s: float = 0.003,
+                settle_timeout_s: float = 0.5, modbus_quiet_s: float = 0.001,
                 serial_stall_s: float = 0.02, start_at: float = 0.0) -> ReplaySession:
     """Start replaying ``capture_dir``; connect drivers to ``session.endpoints``.
 

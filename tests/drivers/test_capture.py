@@ -247,3 +247,29 @@ def test_replay_clock_stepped_waits_for_settle_checks() -> None:
     c.advance(0.2)
     th.join()
     assert woke == [True]
+
+
+def test_stepped_advance_waits_for_released_waiters_to_finish_their_step() -> None:
+    c = ReplayClock(0.0, speed=None, settle_timeout_s=2.0)
+    done: list[float] = []
+    stop = threading.Event()
+
+    def poller() -> None:  # like a driver polling every 0.1 s of capture time
+        nxt = 0.1
+        while not stop.is_set():
+            if c.wait_until(nxt, timeout=0.05):
+                time.sleep(0.05)  # the poll's real work
+                done.append(nxt)
+                nxt += 0.1
+
+    th = threading.Thread(target=poller)
+    th.start()
+    time.sleep(0.05)
+    c.advance(0.05)
+    assert done == []
+    c.advance(0.05)  # releases the 0.1 poll: returns only after its work
+    assert done == [pytest.approx(0.1)]
+    c.advance(0.1)
+    assert len(done) == 2
+    stop.set()
+    th.join()
