@@ -1,0 +1,108 @@
+"""A fleet through a router: two shovels, three cab displays, one mine-office subscriber.
+
+The router is a separate Python process (zenoh-python in router mode); the shovels'
+daemons are clients of it, as in production; the cabs and the office are clients too.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+from shoveld.cli.cab import CabClient, CabState
+from shoveld.daemon.tablefeed import table_service
+from shoveld.model.params import ModelParams
+from shoveld.signals.table import SignalsTable
+
+from .conftest import Collector, free_port, make_cfg
+
+ROUTER = """
+import json, sys, time, zenoh
+c = zenoh.Config()
+c.insert_json5("mode", '"router"')
+c.insert_json5("listen/endpoints", json.dumps([sys.argv[1]]))
+c.insert_json5("scouting/multicast/enabled", "false")
+s = zenoh.open(c)
+print("up", flush=True)
+sys.stdin.read()
+s.close()
+"""
+
+
+def test_fleet_through_a_router(tmp_path: Path, e2e_table: SignalsTable,
+                                params: ModelParams) -> None:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    router = subprocess.Popen([sys.executable, "-c", ROUTER, endpoint], stdin=subprocess.PIPE,
+                              stdout=subprocess.PIPE, text=True)
+    made: list[Any] = []
+    try:
+        assert router.stdout is not None and router.stdout.readline().strip() == "up"
+        services = []
+        for sid in ("s1", "s2"):
+            cfg = make_cfg(tmp_path / sid, shovel={"id": sid},
+                           zenoh={"mode": "client", "listen": [], "connect": [endpoint]})
+            svc, feed = table_service(e2e_table, cfg, params, close_truck_at_end=True)
+            svc.start(zenoh_wait_s=5.0)
+            assert svc.publisher.connected
+            services.append((svc, feed))
+        cabs = {name: CabState() for name in ("s1-a", "s1-b", "s2-a")}
+        for name, state in cabs.items():
+            made.append(CabClient(state, [endpoint], "client", name[:2]))
+        office = Collector(endpoint)
+        made.append(office)
+        for svc, _ in services:
+            assert svc.publisher.wait_subscribers(5.0)
+        time.sleep(0.3)
+        runs = [threading.Thread(target=svc.run, args=(threading.Event(),),
+                                 kwargs={"done": lambda f=feed: f.finished})
+                for svc, feed in services]
+        for th in runs:
+            th.start()
+        for th in runs:
+            th.join(60)
+        for svc, _ in services:
+            svc.flush()
+        assert office.wait(lambda: len(office.of("pass")) >= 6)
+        # the office sees both shovels; each cab only its own
+        by_shovel: dict[str, list[int]] = {}
+        for key, msg, _ in office.samples:
+            if key.endswith("/pass"):
+                by_shovel.setdefault(key.split("/")[1], []).append(msg["pass"])
+        assert by_shovel == {"s1": [1, 2, 3], "s2": [1, 2, 3]}
+        time.sleep(0.3)
+        for name, state in cabs.items():
+            assert set(state.shovels) == {name[:2]}
+            view = state.shovels[name[:2]]
+            assert [c["truck"] for c in view.closed] == [1, 2]
+            assert [p["pass"] for p in view.passes] == [3]
+        # status and liveliness through the router
+        replies = list(office.session.get("shovel/*/status", timeout=3.0))
+        ids = sorted(json.loads(r.ok.payload.to_bytes())["shovel"] for r in replies if r.ok)
+        assert ids == ["s1", "s2"]
+        alive = sorted(str(r.ok.key_expr) for r in
+                       office.session.liveliness().get("shovel/*/alive", timeout=3.0) if r.ok)
+        assert alive == ["shovel/s1/alive", "shovel/s2/alive"]
+        # a shovel that goes away is seen as gone by the cabs
+        services[1][0].close()
+        assert _wait(lambda: cabs["s2-a"].shovels["s2"].alive is False, 5.0)
+        assert cabs["s1-a"].shovels["s1"].alive
+    finally:
+        for m in made:
+            m.close()
+        for svc, _ in locals().get("services", []):
+            svc.close()
+        router.communicate("", timeout=10)
+
+
+def _wait(pred: Any, timeout: float) -> bool:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if pred():
+            return True
+        time.sleep(0.05)
+    return pred()
