@@ -1,0 +1,88 @@
+"""The cab view: state from messages, the ANSI screen, line mode, and the CLI on Zenoh."""
+
+from __future__ import annotations
+
+import io
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+from shoveld.cli.cab import CabState, show
+from shoveld.daemon.tablefeed import table_service
+from shoveld.model.params import ModelParams
+from shoveld.signals.table import SignalsTable
+
+from .conftest import free_port, make_cfg
+
+T = 1_790_000_000.0
+
+
+def fill(state: CabState) -> None:
+    state.on_status("s7", {"truck": {"truck": 4, "passes": 1, "total_kg": 30000.0,
+                                     "target_kg": 136000.0, "fill_pct": 22.1, "status": "under"},
+                           "truck_passes": [{"pass": 11, "truck": 4, "payload_kg": 30000.0,
+                                             "std_kg": 250.0, "valid": True}]})
+    state.on_message("s7", "payload/live", {"time": T, "payload_kg": 31234.0, "std_kg": 400.0,
+                                            "phase": "swing", "valid": True})
+    state.on_message("s7", "pass", {"pass": 12, "truck": 4, "payload_kg": None, "std_kg": None,
+                                    "valid": False, "reason": "only 3 valid samples",
+                                    "end": T})
+    state.on_message("s7", "truck", {"truck": 4, "passes": 2, "total_kg": 30000.0,
+                                     "target_kg": 136000.0, "fill_pct": 22.1,
+                                     "status": "under", "closed": False})
+    state.on_message("s7", "health", {"problems": ["laser: babbling (malformed data)"]})
+
+
+def test_screen_shows_live_passes_truck_and_problems() -> None:
+    state = CabState()
+    fill(state)
+    screen = state.screen()
+    assert "== s7" in screen
+    assert "phase swing" in screen and "31234 kg" in screen
+    assert "truck 4: 2 passes, 30000 of 136000 kg (22.1 %)  UNDER" in screen
+    assert "pass   11    30000 kg" in screen and "pass   12  INVALID" in screen
+    assert "! laser: babbling" in screen
+    state.on_message("s7", "payload/live", {"time": T, "payload_kg": None, "std_kg": None,
+                                            "phase": "dump", "valid": False})
+    assert "no valid estimate" in state.screen()
+
+
+def test_line_mode_and_tty_mode() -> None:
+    state = CabState()
+    fill(state)
+    out = io.StringIO()
+    stop = threading.Event()
+    show(state, out, tty=False, stop=stop, duration=0.0)
+    text = out.getvalue()
+    assert "s7 status: truck 4, 1 passes so far" in text
+    assert "s7 swing   live 31234 kg +- 400 kg" in text
+    assert "s7 pass 12 truck 4: INVALID (only 3 valid samples)" in text
+    assert "s7 health: laser: babbling" in text
+    out = io.StringIO()
+    show(state, out, tty=True, stop=stop, duration=0.0)
+    assert out.getvalue().startswith("\x1b[?25l\x1b[H\x1b[2J== s7")
+    assert out.getvalue().endswith("\x1b[?25h")
+
+
+def test_cab_cli_on_zenoh(tmp_path: Path, e2e_table: SignalsTable, params: ModelParams) -> None:
+    port = free_port()
+    svc, feed = table_service(e2e_table, make_cfg(tmp_path, port), params,
+                              close_truck_at_end=True)
+    svc.start(zenoh_wait_s=5.0)
+    try:
+        cab = subprocess.Popen([sys.executable, "-m", "shoveld", "cab", "--connect",
+                                f"tcp/127.0.0.1:{port}", "--until-closed-trucks", "2",
+                                "--duration", "60"], stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
+        assert svc.publisher.wait_subscribers(20.0)
+        svc.run(threading.Event(), done=lambda: feed.finished)
+        svc.flush()
+        out, err = cab.communicate(timeout=30)
+    finally:
+        svc.close()
+    assert cab.returncode == 0, err
+    assert "t1 status: truck 1, 0 passes so far" in out
+    assert "t1 pass 1 truck 1:" in out and "t1 pass 3 truck 2:" in out
+    assert "t1 truck 1 CLOSED: 2 passes" in out and "t1 truck 2 CLOSED: 1 passes" in out
+    assert " lift " in out and " swing " in out  # live payload lines at phase changes
