@@ -236,7 +236,7 @@ def device_signals(kind: str, driver: Mapping[str, Any]) -> tuple[str, ...]:
 def build_driver(dev: DeviceConfig, clock: Any = None, **kw: Any) -> Any:
     """The driver object of one device (not opened): the drivers' own constructors.
 
-    ``kw`` goes to serial/CAN drivers (``serial_factory``, ``bus_factory``)."""
+    ``kw`` goes to the driver (``serial_factory``, ``bus_factory``, ``client_factory``)."""
     import time as _time
 
     clk = clock if clock is not None else _time.monotonic
@@ -259,7 +259,7 @@ def build_driver(dev: DeviceConfig, clock: Any = None, **kw: Any) -> Any:
         return MtiCanDriver.from_config(d, clock=clk, **kw)
     from drivers.modbus_adc.driver import ModbusAdcDriver
 
-    return ModbusAdcDriver.from_config(dev.name, d, clock=clk)
+    return ModbusAdcDriver.from_config(dev.name, d, clock=clk, **kw)
 
 
 def parse_devices(where: str, devs: Any, default_max_age: float,

@@ -42,7 +42,11 @@ class ReplayRun:
         stop = stop or threading.Event()
         svc = self.service
         paced = self.speed is not None and svc.driver_threads
-        if paced and not svc.wait_drivers(connect_timeout_s):
+        if self.speed is None and svc.driver_threads and hasattr(self.session,
+                                                                  "wait_connected"):
+            # stepped: the replay moves time at about real pace while drivers connect
+            self.session.wait_connected(list(svc.drivers.values()), connect_timeout_s)
+        elif paced and not svc.wait_drivers(connect_timeout_s):
             # paced: give the drivers their handshakes before the recording runs away.
             # Stepped: time stands still until the loop moves it, and some devices only
             # count as connected once data flows, so the loop starts at once.

@@ -296,8 +296,7 @@ class SyncReplay:
                 reads = list(self.capture.modbus_reads(name))
                 regs = RecordedRegisters(reads, self.clock)
                 tr = MemoryModbus(regs, regs.end_t)
-                drv = build_driver(dev, self.clock)
-                drv._make_client = lambda _t=tr: _t  # type: ignore[attr-defined]
+                drv = build_driver(dev, self.clock, client_factory=lambda cfg, _t=tr: _t)
             else:  # pragma: no cover - read_capture rejects unknown kinds
                 raise ValueError(f"{name}: kind {entry.kind!r} cannot be replayed")
             self.drivers[name] = drv
