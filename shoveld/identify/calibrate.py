@@ -223,6 +223,12 @@ class Calibrator:
         return np.concatenate(ws), np.concatenate(ys)
 
     def fit(self, tables: list[SignalsTable]) -> Calibrator:
+        for t in self.model.terms:
+            # A term with a nonlinear constant (a delay, a radius) finds it first by a 1-D
+            # search over fits of this same calibrator (shoveld.model.effects).
+            search = getattr(t, "search_hyper", None)
+            if search is not None:
+                search(self, tables)
         self.files_ = self.prepare(tables)
         names = self.model.param_names
         w_all, y_all = self._rows(self.files_, "all")

@@ -1,0 +1,190 @@
+"""Identify a model (the project's Calibrator) and judge it on passes it was not fitted on.
+
+A model whose terms the calibration trials excite is identified on the trials
+alone; every measured pass is then held out. A term only swinging excites
+(``swing_centrifugal``, when the trials do not swing) needs operating data: the
+model is then identified on the trials plus the verified passes of all but one
+fold, and judged on that fold, round the folds (cross-validation over passes).
+Either way each pass is judged by a model that has not seen it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from shoveld.diagnose.data import DataSet, Pass
+from shoveld.identify.calibrate import Calibrator, FileData
+from shoveld.model.kin import Kinematics
+from shoveld.model.model import Model
+from shoveld.model.params import ModelParams
+from shoveld.signals.table import SignalsTable
+
+N_FOLDS = 4
+SWING_EXCITED_RAD_S = 0.1
+"""A calibration trial swinging faster than this excites the swing terms."""
+
+
+class DiagCalibrator(Calibrator):
+    """The project's ``Calibrator``, fed the diagnosis's prepared data for a fold."""
+
+    def __init__(self, model: Model, dataset: DataSet, train: set[int] | None,
+                 method: str = "staged") -> None:
+        super().__init__(model=model, method=method, exclusion=dataset.exclusion,
+                         window_s=dataset.window_s)
+        self.dataset = dataset
+        self.train = train
+
+    def prepare(self, tables: list[SignalsTable]) -> list[FileData]:
+        return self.dataset.training_files(self.model, self.train)
+
+
+def needs_operation(model: Model, dataset: DataSet) -> bool:
+    """Does the model have a term the calibration trials cannot identify?"""
+    if not any(getattr(t, "needs_swing", False) for t in model.terms):
+        return False
+    return dataset.calib_swing_rate() < SWING_EXCITED_RAD_S
+
+
+def fit(dataset: DataSet, effects: list[str], hyper: dict[str, dict[str, Any]],
+        train: set[int] | None, method: str = "staged") -> ModelParams:
+    """Identify base + ``effects`` on the trials (plus the passes in ``train``)."""
+    model = Model.from_names(effects, {k: dict(v) for k, v in hyper.items()})
+    cal = DiagCalibrator(model, dataset, train, method).fit(dataset.calib)
+    assert cal.params_ is not None
+    return cal.params_
+
+
+@dataclass
+class PassScore:
+    """How one model did on one held-out pass."""
+
+    loss: float
+    """Mean over the pass's samples of the squared residuals divided by the model's K_H,
+    in units of the base model's (so divided) noise, both equations summed; with the
+    payload known (verified) or fitted to the pass."""
+    payload_kg: float
+    """The model's estimate from the pass's lift and swing (offline, least squares)."""
+    samples: int
+
+
+@dataclass
+class Evaluation:
+    """A model judged pass by pass on data it was not fitted on."""
+
+    effects: list[str]
+    folds: list[ModelParams]
+    fold_of: dict[int, int]
+    scores: dict[int, PassScore]
+    cross_validated: bool
+    final: ModelParams | None = None
+    """Fitted on everything it may use (the trials, and all verified passes if needed)."""
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def loss(self, passes: list[Pass]) -> np.ndarray:
+        return np.array([self.scores[p.index].loss for p in passes])
+
+    def payload_errors(self, passes: list[Pass]) -> np.ndarray:
+        return np.array([self.scores[p.index].payload_kg - p.payload_kg for p in passes
+                         if p.verified])
+
+    def hyper(self) -> dict[str, dict[str, Any]]:
+        p = self.final or self.folds[0]
+        return {k: dict(v) for k, v in p.hyper.items()}
+
+
+def assign_folds(passes: list[Pass], k: int) -> dict[int, int]:
+    """Verified passes round-robin over k folds, the others likewise."""
+    out: dict[int, int] = {}
+    ver = [p for p in passes if p.verified]
+    oth = [p for p in passes if not p.verified]
+    for i, p in enumerate(ver):
+        out[p.index] = i % k
+    for i, p in enumerate(oth):
+        out[p.index] = i % k
+    return out
+
+
+def current_gains(model: Model, k: Kinematics, p: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Per sample, how much the handle residual changes per ampere of hoist current and
+    the crowd residual per ampere of crowd current (finite difference of the model)."""
+    e0 = model.residual(k, p, 0.0)
+    kh = replace(k, i_h=k.i_h + 1.0, i_h_est=k.i_h_est + 1.0)
+    kc = replace(k, i_c=k.i_c + 1.0, i_c_est=k.i_c_est + 1.0)
+    return model.residual(kh, p, 0.0)[:, 0] - e0[:, 0], model.residual(kc, p, 0.0)[:, 1] - e0[:, 1]
+
+
+def effective_k_h(model: Model, k: Kinematics, p: np.ndarray) -> float:
+    """The model's rope pull per ampere over these samples (K_H for the base model; with
+    the field or saturation terms, what K_H has become at these fields and currents)."""
+    g_h, _ = current_gains(model, k, p)
+    kh = g_h / (-k.d * k.sin_a3)
+    kh = kh[np.isfinite(kh)]
+    return float(np.median(kh)) if len(kh) else float("nan")
+
+
+def score_pass(params: ModelParams, dataset: DataSet, p: Pass, sigma0: np.ndarray,
+               valid_ref: list[np.ndarray]) -> PassScore:
+    """Residual loss and payload estimate of one pass under ``params``."""
+    model = params.model()
+    view = dataset.view(model)
+    f = view.measured[p.table]
+    idx = p.eval_idx[valid_ref[p.table][p.eval_idx] & f.use[p.eval_idx]]
+    if len(idx) < 10:
+        return PassScore(math.nan, math.nan, len(idx))
+    k = f.kin.take(idx)
+    w, phi, psi = model.regressor(k)
+    # The equations are homogeneous: divided by the model's own pull per ampere the
+    # residual is in amperes of hoist current (times a lever arm) whatever scale a model
+    # settled on, so a model is not charged for its larger copy of the current noise.
+    scale = effective_k_h(model, k, params.values) * sigma0
+    a = (phi + psi @ params.values) / scale
+    b = -(w @ params.values) / scale
+    ok = np.isfinite(a).all(axis=1) & np.isfinite(b).all(axis=1)
+    a, b = a[ok], b[ok]
+    m_hat = float(np.sum(a * b) / np.sum(a * a))
+    m = p.payload_kg if p.verified else m_hat
+    e = m * a - b
+    return PassScore(float(np.mean(np.sum(e * e, axis=1))), m_hat, int(ok.sum()))
+
+
+def evaluate(dataset: DataSet, effects: list[str], hyper: dict[str, dict[str, Any]],
+             sigma0: np.ndarray, valid_ref: list[np.ndarray], method: str = "staged",
+             final: bool = False, fold_hyper: list[dict[str, dict[str, Any]]] | None = None
+             ) -> Evaluation:
+    """Fit and judge base + ``effects`` on held-out passes (see the module doc).
+
+    ``fold_hyper`` gives, per fold, hyper-parameters already found on that fold's
+    training data (by the model this one extends), so they are not searched again.
+    """
+    passes = dataset.passes
+    model = Model.from_names(effects, hyper)
+    cv = needs_operation(model, dataset)
+    n_ver = sum(p.verified for p in passes)
+    if cv and n_ver < 2:
+        raise ValueError(f"{effects}: the calibration trials do not swing and fewer than two "
+                         "measured passes have a verified payload; cannot identify it")
+    if not cv:
+        params = fit(dataset, effects, hyper, None, method)
+        fold_of = {p.index: 0 for p in passes}
+        folds = [params]
+    else:
+        k = min(N_FOLDS, n_ver)
+        fold_of = assign_folds(passes, k)
+        folds = []
+        for j in range(k):
+            train = {p.index for p in passes if p.verified and fold_of[p.index] != j}
+            h = {**{e: dict(v) for e, v in (fold_hyper[j] if fold_hyper and j < len(
+                fold_hyper) else {}).items() if e in effects}, **hyper}
+            folds.append(fit(dataset, effects, h, train, method))
+    scores = {p.index: score_pass(folds[fold_of[p.index]], dataset, p, sigma0, valid_ref)
+              for p in passes}
+    ev = Evaluation(list(effects), folds, fold_of, scores, cv)
+    if final:
+        ev.final = folds[0] if not cv else fit(
+            dataset, effects, hyper, {p.index for p in passes if p.verified}, method)
+    return ev
