@@ -26,6 +26,9 @@ from shoveld.signals.columns import BY_NAME
 ANGLE_KEYS = frozenset({"yaw_deg"})
 """Quantities that wrap at +-180 deg: interpolated the short way round."""
 
+_RANGE = {c: (BY_NAME[c].lo, BY_NAME[c].hi) for c in BY_NAME}
+"""Plausible range per signals-table column (values outside are invalid)."""
+
 
 @dataclass
 class DeviceState:
@@ -83,11 +86,11 @@ class Assembler:
     def _set(signal: str, v: float, values: dict[str, float], invalid: set[str]) -> None:
         """Record a value, or mark it invalid when it is outside the column's range
         (a unit or scaling mistake, a broken transducer)."""
-        col = BY_NAME[signal]
-        if math.isnan(v) or not (col.lo <= v <= col.hi):
-            invalid.add(signal)
-        else:
+        lo, hi = _RANGE[signal]
+        if lo <= v <= hi:  # False for NaN too
             values[signal] = v
+        else:
+            invalid.add(signal)
 
     # -- per device -----------------------------------------------------------------------
     def _device(self, t: float, name: str, dev: DeviceConfig, values: dict[str, float],
@@ -121,8 +124,14 @@ class Assembler:
         elif dev.kind in LASER_KINDS:
             self._one(t, b, a, "distance_m", "crowd_m", self.inst.crowd_m, values, invalid)
         elif dev.kind in ADC_KINDS:
+            r = b.reading
+            vals, bad = r.values, r.invalid
             for s in dev.signals:
-                self._one(t, b, a, s, s, None, values, invalid)
+                if a is None:  # the common case: hold the latest reading
+                    v = vals.get(s, math.nan) if s not in bad else math.nan
+                else:
+                    v = self._raw(t, b, a, s)
+                self._set(s, v, values, invalid)
         st.invalid = sorted(s for s in dev.signals if s in invalid)
         st.state = "invalid" if len(invalid) > bad_before else "ok"
 

@@ -57,15 +57,14 @@ class ReadingStore:
 
     def bracket(self, device: str, t: float) -> tuple[Stored | None, Stored | None]:
         """(latest reading at or before ``t``, earliest reading after ``t``)."""
-        with self._lock:
-            recent = list(self._recent[device])
         before: Stored | None = None
         after: Stored | None = None
-        for s in reversed(recent):
-            if s.reading.t_host <= t:
-                before = s
-                break
-            after = s
+        with self._lock:
+            for s in reversed(self._recent[device]):
+                if s.reading.t_host <= t:
+                    before = s
+                    break
+                after = s
         return before, after
 
     def count(self, device: str) -> int:
