@@ -297,6 +297,8 @@ class Service:
                     self.truck_passes = []
                 self.truck_msg = msg
             else:
+                if self.truck_msg is not None and self.truck_msg.get("truck") == tdict["truck"]:
+                    self.truck_msg = msg
                 log.info("truck %d closed: %d passes, %.0f kg (%s)", tdict["truck"],
                          tdict["passes"], tdict["total_kg"], tdict["status"])
             self.publisher.put("truck", msg)
@@ -352,7 +354,7 @@ class Service:
     def status(self) -> dict[str, Any]:
         """The answer to ``<prefix>/<id>/status``: everything a display needs to start."""
         h = self.health_msg or {}
-        return {"shovel": self.cfg.shovel_id, "time": round(time.time(), 3),
+        return {"shovel": self.cfg.shovel_id, "time": round(self.clock.wall(self.clock.now()), 3),
                 "ready": self.ready, "live": self.live_msg, "truck": self.truck_msg,
                 "truck_passes": self.truck_passes, "last_pass": self.last_pass,
                 "ok": h.get("ok"), "problems": h.get("problems"), "health": h or None}
