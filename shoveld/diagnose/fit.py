@@ -110,11 +110,13 @@ def assign_folds(passes: list[Pass], k: int) -> dict[int, int]:
 
 def current_gains(model: Model, k: Kinematics, p: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray]:
-    """Per sample, how much the handle residual changes per ampere of hoist current and
-    the crowd residual per ampere of crowd current (finite difference of the model)."""
+    """Per sample, how much the handle residual changes per ampere of the measured hoist
+    current and the crowd residual per ampere of the measured crowd current (finite
+    difference of the model). The neighbour estimates (``i_h_est``) are held: a
+    sample's own current noise does not reach them, so this is the gain of the noise."""
     e0 = model.residual(k, p, 0.0)
-    kh = replace(k, i_h=k.i_h + 1.0, i_h_est=k.i_h_est + 1.0)
-    kc = replace(k, i_c=k.i_c + 1.0, i_c_est=k.i_c_est + 1.0)
+    kh = replace(k, i_h=k.i_h + 1.0, i_h_est=k.i_h_est)
+    kc = replace(k, i_c=k.i_c + 1.0, i_c_est=k.i_c_est)
     return model.residual(kh, p, 0.0)[:, 0] - e0[:, 0], model.residual(kc, p, 0.0)[:, 1] - e0[:, 1]
 
 
