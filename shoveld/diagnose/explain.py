@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from shoveld.diagnose.data import DataSet
-from shoveld.diagnose.fit import Evaluation, current_gains
+from shoveld.diagnose.fit import Evaluation, as_measured, current_residuals
 
 VARIABLES: dict[str, tuple[str, str]] = {
     "hoist_field_a": ("hoist field current", "A"),
@@ -65,12 +65,12 @@ def residuals(dataset: DataSet, ev: Evaluation, valid_ref: list[np.ndarray]) -> 
         idx = p.eval_idx[valid_ref[p.table][p.eval_idx] & f.use[p.eval_idx]]
         if len(idx) < 10:
             continue
-        k = f.kin.take(idx)
+        k = as_measured(f.kin.take(idx))
         m = p.payload_kg if p.verified else ev.scores[p.index].payload_kg
         e = model.residual(k, params.values, m)
-        g_h, g_c = current_gains(model, k, params.values)
-        out["hoist_a"].append(e[:, 0] / g_h)
-        out["crowd_a"].append(e[:, 1] / g_c)
+        r = current_residuals(model, k, params.values, m)
+        out["hoist_a"].append(r[:, 0])
+        out["crowd_a"].append(r[:, 1])
         out["handle_nm"].append(e[:, 0])
         out["crowd_n"].append(e[:, 1])
         out["pass"].append(np.full(len(idx), p.index))

@@ -63,9 +63,8 @@ class PassScore:
     """How one model did on one held-out pass."""
 
     loss: float
-    """Mean over the pass's samples of the squared residuals divided by the model's K_H,
-    in units of the base model's (so divided) noise, both equations summed; with the
-    payload known (verified) or fitted to the pass."""
+    """Mean over the pass's samples of the squared current residuals (hoist and crowd,
+    each in units of ``sigma0``), with the payload known (verified) or fitted."""
     payload_kg: float
     """The model's estimate from the pass's lift and swing (offline, least squares)."""
     samples: int
@@ -108,42 +107,54 @@ def assign_folds(passes: list[Pass], k: int) -> dict[int, int]:
     return out
 
 
+def as_measured(k: Kinematics) -> Kinematics:
+    """The kinematics with the currents as measured in every term.
+
+    Identification gives terms nonlinear in a current its neighbour estimate, so that
+    its noise does not correlate with the other side of the equation; a prediction,
+    like the live engine, uses the measured current throughout."""
+    return replace(k, i_h_est=k.i_h, i_c_est=k.i_c)
+
+
 def current_gains(model: Model, k: Kinematics, p: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray]:
-    """Per sample, how much the handle residual changes per ampere of the measured hoist
-    current and the crowd residual per ampere of the measured crowd current (finite
-    difference of the model). The neighbour estimates (``i_h_est``) are held: a
-    sample's own current noise does not reach them, so this is the gain of the noise."""
+    """Per sample, how much the handle residual changes per ampere of hoist current and
+    the crowd residual per ampere of crowd current (finite difference of the model)."""
     e0 = model.residual(k, p, 0.0)
-    kh = replace(k, i_h=k.i_h + 1.0, i_h_est=k.i_h_est)
-    kc = replace(k, i_c=k.i_c + 1.0, i_c_est=k.i_c_est)
+    kh = replace(k, i_h=k.i_h + 1.0, i_h_est=k.i_h_est + 1.0)
+    kc = replace(k, i_c=k.i_c + 1.0, i_c_est=k.i_c_est + 1.0)
     return model.residual(kh, p, 0.0)[:, 0] - e0[:, 0], model.residual(kc, p, 0.0)[:, 1] - e0[:, 1]
 
 
-def effective_k_h(model: Model, k: Kinematics, p: np.ndarray) -> float:
-    """The model's rope pull per ampere over these samples (K_H for the base model; with
-    the field or saturation terms, what K_H has become at these fields and currents)."""
-    g_h, _ = current_gains(model, k, p)
-    kh = g_h / (-k.d * k.sin_a3)
-    kh = kh[np.isfinite(kh)]
-    return float(np.median(kh)) if len(kh) else float("nan")
+def current_residuals(model: Model, k: Kinematics, p: np.ndarray, m: float | np.ndarray
+                      ) -> np.ndarray:
+    """(N, 2): measured minus predicted hoist and crowd current, A. The hoist current is
+    predicted from the handle equation, the crowd current from the crowd equation with
+    the measured hoist current; ``k`` should come from ``as_measured``."""
+    e = model.residual(k, p, m)
+    g_h, g_c = current_gains(model, k, p)
+    return np.stack([e[:, 0] / g_h, e[:, 1] / g_c], axis=-1)
 
 
 def score_pass(params: ModelParams, dataset: DataSet, p: Pass, sigma0: np.ndarray,
                valid_ref: list[np.ndarray]) -> PassScore:
-    """Residual loss and payload estimate of one pass under ``params``."""
+    """Residual loss and payload estimate of one pass under ``params``.
+
+    Both are in current units: the residual of each equation divided by how much it
+    changes per ampere of its motor's current, i.e. measured minus predicted current,
+    which every model predicts whatever its parameters mean; ``sigma0`` (A per channel)
+    is the common unit.
+    """
     model = params.model()
     view = dataset.view(model)
     f = view.measured[p.table]
     idx = p.eval_idx[valid_ref[p.table][p.eval_idx] & f.use[p.eval_idx]]
     if len(idx) < 10:
         return PassScore(math.nan, math.nan, len(idx))
-    k = f.kin.take(idx)
+    k = as_measured(f.kin.take(idx))
     w, phi, psi = model.regressor(k)
-    # The equations are homogeneous: divided by the model's own pull per ampere the
-    # residual is in amperes of hoist current (times a lever arm) whatever scale a model
-    # settled on, so a model is not charged for its larger copy of the current noise.
-    scale = effective_k_h(model, k, params.values) * sigma0
+    g_h, g_c = current_gains(model, k, params.values)
+    scale = np.stack([g_h, g_c], axis=-1) * sigma0
     a = (phi + psi @ params.values) / scale
     b = -(w @ params.values) / scale
     ok = np.isfinite(a).all(axis=1) & np.isfinite(b).all(axis=1)

@@ -93,22 +93,24 @@ def _fine_to_samples(ctx: dict[str, Any], x: np.ndarray) -> np.ndarray:
 
 @register_effect
 class FieldWeakeningEffect(SimEffect):
-    """The hoisting field is not held at 70 A: the regulator moves it with the rope pull.
+    """The hoisting field is not held at 70 A: the drive forces it while the hoist
+    accelerates.
 
-    Field forcing: to get more pull per ampere when the dipper is heavy, the drive
-    raises the hoist field setpoint with the load, 70 A + M x (rope pull / pull at
-    500 A); a negative M is a field that sags with load instead. Lowering stays at
-    30 A. The field winding's lag and the plant's magnetisation curve
-    (flux ~ tanh(i_f / knee)) turn this into a force per ampere that changes with
-    the load and during the lift, while the base model assumes the 70 A value.
+    To get more pull per ampere when it has to speed the dipper up, the hoist drive
+    raises the field setpoint with the hoist's acceleration: 70 A + M x (rope
+    acceleration / 0.5 m/s^2), up to 70 A + M, back to 70 A at constant speed; a
+    negative M weakens the field instead. Lowering stays at 30 A. The field winding's
+    lag and the plant's magnetisation curve (flux ~ tanh(i_f / knee)) turn this into a
+    pull per ampere that changes during every lift, while the base model assumes the
+    70 A value.
     """
 
     name = "hoist_field_weakening"
-    default_magnitude = 6.0
-    magnitude_unit = "A (field change at 500 A of hoist pull)"
-    description = "hoist field current moving with the rope pull while hoisting"
-    typical_range = (4.0, 10.0)
-    ref_a = 500.0
+    default_magnitude = 12.0
+    magnitude_unit = "A (field forcing at 0.5 m/s^2 of hoist acceleration)"
+    description = "hoist field forced while the hoist accelerates"
+    typical_range = (8.0, 16.0)
+    ref_acc = 0.5
 
     def before_currents(self, ctx: dict[str, Any]) -> None:
         from shoveld.sim.plant import derivative, first_order_lag, rope_length
@@ -116,8 +118,9 @@ class FieldWeakeningEffect(SimEffect):
         pp, m, dt = ctx["params"], ctx["motion"], ctx["dt"]
         boom = ctx.get("boom_true", m.boom)
         lr = derivative(rope_length(m.th, m.d, boom, pp.l_bs), dt)
-        load = np.clip(ctx["rope_force"] / (pp.K_H * self.ref_a), 0.0, 2.0)
-        hoisting = pp.hoist_field_hoisting_a + self.magnitude * load
+        acc_in = -derivative(lr, dt)
+        forcing = np.clip(acc_in / self.ref_acc, 0.0, 1.0)
+        hoisting = pp.hoist_field_hoisting_a + self.magnitude * forcing
         target = np.where(lr > 0.02, pp.hoist_field_lowering_a, hoisting)
         ctx["i_hf"] = first_order_lag(target, dt, pp.hoist_field_tau_s)
 
