@@ -40,6 +40,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+TOPICS = frozenset({"payload/live", "pass", "truck", "health"})
+
+
 def _kg(x: Any) -> str:
     return "     --" if x is None else f"{x:7.0f}"
 
@@ -128,9 +131,9 @@ class CabState:
             if st.get("live"):
                 v.live = st["live"]
             v.problems = list(st.get("problems") or [])
-        self.lines.append(f"{time.strftime('%H:%M:%S')} {shovel} status: truck "
-                          f"{(st.get('truck') or {}).get('truck')}, "
-                          f"{len(v.passes)} passes so far")
+            self.lines.append(f"{time.strftime('%H:%M:%S')} {shovel} status: truck "
+                              f"{(st.get('truck') or {}).get('truck')}, "
+                              f"{len(v.passes)} passes so far")
 
     def on_alive(self, shovel: str, alive: bool) -> None:
         with self.lock:
@@ -205,15 +208,19 @@ class CabClient:
 
         def on_sample(sample: Any) -> None:
             key = str(sample.key_expr).split("/")
+            topic = "/".join(key[n + 1:])
+            if topic not in TOPICS:
+                return
             try:
                 msg = json.loads(sample.payload.to_bytes())
             except ValueError:
                 return
-            state.on_message(key[n], "/".join(key[n + 1:]), msg)
+            state.on_message(key[n], topic, msg)
 
         base = f"{prefix}/{shovel}"
-        self._subs = [self.session.declare_subscriber(f"{base}/{topic}", on_sample)
-                      for topic in ("payload/live", "pass", "truck", "health")]
+        # one subscriber for every topic: samples from one shovel arrive in the order
+        # they were put (a pass before the truck it completes)
+        self._subs = [self.session.declare_subscriber(f"{base}/**", on_sample)]
 
         def on_alive(sample: Any) -> None:
             key = str(sample.key_expr).split("/")
