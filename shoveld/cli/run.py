@@ -40,6 +40,7 @@ def install_stop_signals(stop: threading.Event) -> None:
 
 def run(args: argparse.Namespace) -> int:
     import dataclasses
+    import sqlite3
     from pathlib import Path
 
     from shoveld.daemon.config import ConfigError, check_params, load_config
@@ -65,7 +66,10 @@ def run(args: argparse.Namespace) -> int:
     log.info("shoveld %s starting: %d devices, loop %.0f Hz, state %s", cfg.shovel_id,
              len(cfg.devices), cfg.loop.rate_hz, cfg.state_dir)
     try:
-        service.start()
+        try:
+            service.start()
+        except (OSError, sqlite3.Error) as e:
+            raise CliError(f"cannot open the pass log in {cfg.state_dir}: {e}") from None
         service.run(stop)
     finally:
         service.close()

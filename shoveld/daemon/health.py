@@ -102,6 +102,8 @@ def problems(drivers: Mapping[str, dict[str, Any]], loop: dict[str, Any],
         out.append(f"zenoh: session not open ({zenoh.get('last_error') or 'connecting'})")
     if persist.get("last_error"):
         out.append(f"pass log: {persist['last_error']}")
+    if loop.get("failing_now"):
+        out.append(f"loop: the last {loop['failing_now']} ticks failed (see the log)")
     recent, ticks = loop.get("overruns_recent") or 0, loop.get("ticks_recent") or 0
     if recent and recent > 0.02 * max(ticks, 1):
         out.append(f"loop: {recent} overruns in the last {ticks} ticks")

@@ -69,7 +69,10 @@ class Service:
         self.loop_stats = LoopStats(keep_all=record_stats)
         self.latency = LatencyStats(keep_all=record_stats)
         self.rates = RateMeter()
-        self.loop = FixedRateLoop(self.clock, cfg.loop.rate_hz, self._tick, self.loop_stats)
+        self.loop = FixedRateLoop(self.clock, cfg.loop.rate_hz, self._safe_tick,
+                                  self.loop_stats)
+        self.tick_errors = 0
+        self._consecutive_errors = 0
         self.passlog: PassLog | None = None
         self.engine: Engine | None = None
         self._stop_drivers = threading.Event()
@@ -170,6 +173,22 @@ class Service:
         self.notifier.close()
 
     # -- the tick ----------------------------------------------------------------------------
+    MAX_CONSECUTIVE_ERRORS = 50
+    """After this many failing ticks in a row the watchdog is starved: systemd restarts."""
+
+    def _safe_tick(self, t: float) -> None:
+        """A tick that raises is logged and counted, not fatal: the pass log and the truck
+        are safe, and a transient fault (a strange reading) must not stop the weighing.
+        A persistent one stops the watchdog pings, so systemd restarts the service."""
+        try:
+            self._tick(t)
+            self._consecutive_errors = 0
+        except Exception:  # noqa: BLE001
+            self.tick_errors += 1
+            self._consecutive_errors += 1
+            if self._consecutive_errors in (1, 10) or self.tick_errors % 1000 == 0:
+                log.exception("tick at %.3f failed (%d errors so far)", t, self.tick_errors)
+
     def _tick(self, t: float) -> None:
         engine = self.engine
         assert engine is not None
@@ -217,6 +236,7 @@ class Service:
     def _healthy(self) -> bool:
         """Watchdog pings only while the loop keeps its schedule and the pass log lives."""
         return (self.loop.behind_s < self.cfg.loop.watchdog_max_late_s
+                and self._consecutive_errors < self.MAX_CONSECUTIVE_ERRORS
                 and self._persist_thread is not None and self._persist_thread.is_alive())
 
     def _event(self, ev: Any, t: float) -> None:
@@ -339,6 +359,8 @@ class Service:
         self._prev_overruns = self.loop_stats.overruns
         self._prev_ticks = self.loop_stats.ticks
         loop["publish_latency_ms"] = self.latency.as_dict()
+        loop["tick_errors"] = self.tick_errors
+        loop["failing_now"] = self._consecutive_errors
         zen = self.publisher.health()
         persist = {"passes_written": self.passes_written, "queue": self._q.qsize(),
                    "last_error": self.persist_error}

@@ -8,12 +8,16 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
+
+import pytest
 
 from hil_fixtures.virtual_shovel import VirtualShovel
 from shoveld.cli.demo import write_demo_config
 from shoveld.daemon.notify import Notifier
+from shoveld.daemon.service import Service
 from shoveld.daemon.tablefeed import table_service
 from shoveld.model.params import ModelParams
 from shoveld.signals.table import SignalsTable
@@ -93,6 +97,47 @@ def test_watchdog_only_while_healthy(tmp_path: Path, e2e_table: SignalsTable,
         svc.loop.behind_s = 0.0
         svc._tick(0.01)
         assert sock.recv(100) == b"WATCHDOG=1"
+    finally:
+        svc.close()
+        sock.close()
+
+
+def test_a_failing_tick_is_counted_and_persistent_failure_starves_the_watchdog(
+        tmp_path: Path, e2e_table: SignalsTable, params: ModelParams) -> None:
+    path = tmp_path / "n"
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    sock.bind(str(path))
+    sock.settimeout(0.2)
+    notifier = Notifier({"NOTIFY_SOCKET": str(path), "WATCHDOG_USEC": "2"})
+    svc, feed = table_service(e2e_table, make_cfg(tmp_path), params, notifier=notifier)
+    svc.start()
+    engine = svc.engine
+    assert engine is not None
+    real_step = engine.step
+    fail = {"n": 1}
+
+    def flaky(s: object) -> list[object]:
+        if fail["n"] > 0:
+            fail["n"] -= 1
+            raise ValueError("strange reading")
+        return real_step(s)  # type: ignore[arg-type]
+    engine.step = flaky  # type: ignore[method-assign]
+    try:
+        svc.run(threading.Event(), max_ticks=20)
+        assert svc.tick_errors == 1 and svc.loop_stats.ticks == 20
+        assert svc._healthy()
+        fail["n"] = 10_000
+        svc.run(threading.Event(), max_ticks=Service.MAX_CONSECUTIVE_ERRORS + 5)
+        assert not svc._healthy()
+        while True:  # drain what was sent while healthy
+            try:
+                sock.recv(100)
+            except TimeoutError:
+                break
+        svc._safe_tick(1000.0)
+        with pytest.raises(TimeoutError):
+            while sock.recv(100) != b"WATCHDOG=1":
+                pass
     finally:
         svc.close()
         sock.close()
