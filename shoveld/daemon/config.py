@@ -317,6 +317,23 @@ def check_coverage(where: str, devices: Mapping[str, DeviceConfig]) -> None:
 
 # -- the file ------------------------------------------------------------------------------
 
+def _check_zenoh_extra(where: str, extra: Mapping[str, Any]) -> None:
+    """Raw Zenoh keys are checked by Zenoh itself, now rather than at every retry."""
+    if not extra:
+        return
+    import json
+
+    import zenoh
+
+    c = zenoh.Config()
+    for k, v in extra.items():
+        try:
+            c.insert_json5(k, json.dumps(v))
+        except Exception as e:  # noqa: BLE001 - zenoh.ZError
+            raise ConfigError(f"{where}: key 'zenoh.config.{k}': Zenoh refuses it ({e})"
+                              ) from None
+
+
 def parse_config(doc: Mapping[str, Any], where: str = "<config>",
                  base_dir: Path | None = None, check_drivers: bool = True,
                  require_devices: bool = True) -> DaemonConfig:
@@ -363,6 +380,7 @@ def parse_config(doc: Mapping[str, Any], where: str = "<config>",
                                             hi=loop.rate_hz),
                      extra=dict(zr.table("config")))
     zr.done()
+    _check_zenoh_extra(where, zc.extra)
 
     inst = _dataclass_from(where, Installation, top.table("installation"), "installation.")
     if inst.crowd_gain == 0 or inst.handle_pitch_sign == 0 or inst.swing_yaw_sign == 0:

@@ -67,6 +67,8 @@ def test_defaults_peer_on_loopback(tmp_path: Path) -> None:
     ('connect = ["tcp/10.20.0.2:7447", "tcp/10.20.0.3:7447"]', "connect = []", "zenoh.connect"),
     ('connect = ["tcp/10.20.0.2:7447",', 'connect = ["10.20.0.2:7447",', "zenoh.connect"),
     ("target_kg = 136000.0", "target_kg = -1", "truck.target_kg"),
+    ("live_rate_hz = 10.0\n", 'live_rate_hz = 10.0\n[zenoh.config]\n"transport/bogus" = 3\n',
+     "zenoh.config.transport/bogus"),
     ("crowd_offset_m = 5.88", "crowd_offset = 5.88", "installation.crowd_offset"),
     ("max_age_s = 0.1", "max_age_s = 0", "devices.mti.max_age_s"),
     ('kind = "mti_serial"', 'kind = "mti"', "devices.mti.kind"),
