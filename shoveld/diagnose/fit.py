@@ -23,7 +23,7 @@ from shoveld.model.model import Model
 from shoveld.model.params import ModelParams
 from shoveld.signals.table import SignalsTable
 
-N_FOLDS = 4
+N_FOLDS = 3
 SWING_EXCITED_RAD_S = 0.1
 """A calibration trial swinging faster than this excites the swing terms."""
 

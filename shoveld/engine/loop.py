@@ -116,6 +116,7 @@ class Engine:
         self.f_d = JointFilter(CROWD, dt)
         self.f_sw = JointFilter(SWING, dt)
         self.batch: list[tuple[float, ...]] = []
+        self._cached: tuple[int, float, float] = (-1, math.nan, math.nan)
         self.uses_field = any(getattr(t, "uses_field_current", False) for t in self.model.terms)
         self.lagged: FixedLagSavgol[tuple[Sample, bool, int]] = FixedLagSavgol(
             self.cfg.window_s, dt, 3)
@@ -130,18 +131,25 @@ class Engine:
         self.last_dump_t = -math.inf
         self.last: LiveEstimate | None = None
         self.t0 = math.nan
+        # Terms that re-shape the signals (e.g. re-aligning a late sensor stream) do it
+        # causally here, sample by sample, as their transform does offline.
+        self.streams = [f for t in self.model.terms
+                        if (f := getattr(t, "stream", lambda: None)()) is not None]
 
     # -- public -----------------------------------------------------------------------
     def step(self, s: Sample) -> list[Event]:
         """Process one sample; return the events it produced (always one LiveEstimate)."""
+        for f in self.streams:
+            s = f(s)
         events: list[Event] = []
         t = s.time_s
         bad = s.invalid
-        th, thd, thdd = self.f_th.update(t, math.nan if "handle_deg" in bad
-                                         else math.radians(s.handle_deg))
-        d, dd, ddd = self.f_d.update(t, math.nan if "crowd_m" in bad else s.crowd_m)
-        sw, swd, swdd = self.f_sw.update(t, math.nan if "swing_deg" in bad
-                                         else math.radians(s.swing_deg))
+        z_th = math.nan if "handle_deg" in bad else math.radians(s.handle_deg)
+        z_d = math.nan if "crowd_m" in bad else s.crowd_m
+        z_sw = math.nan if "swing_deg" in bad else math.radians(s.swing_deg)
+        th, thd, thdd = self.f_th.update(t, z_th)
+        d, dd, ddd = self.f_d.update(t, z_d)
+        sw, swd, swdd = self.f_sw.update(t, z_sw)
         prev = self.phases.phase
         if math.isnan(self.t0):
             self.t0 = t
@@ -154,10 +162,7 @@ class Engine:
             events.extend(self._transition(prev, ph, t))
         valid = False
         settled = ph in ESTIMATING and t - self.dig_end >= self.cfg.settle_s
-        out = self.lagged.push(t, (math.nan if "handle_deg" in bad else math.radians(s.handle_deg),
-                                   math.nan if "crowd_m" in bad else s.crowd_m,
-                                   math.radians(s.swing_deg) if "swing_deg" not in bad
-                                   and not math.isnan(s.swing_deg) else 0.0),
+        out = self.lagged.push(t, (z_th, z_d, 0.0 if z_sw != z_sw else z_sw),
                                (s, settled, self.pass_index))
         if self.cfg.payload_rates == "kalman":
             if settled and self.rls is not None:
@@ -171,7 +176,9 @@ class Engine:
         if self.batch and ph not in ESTIMATING:
             self._flush()
         if self.rls is not None and self.rls.n:
-            est = LiveEstimate(t, PHASES[ph], self.rls.payload_kg, self._std(),
+            if self._cached[0] != self.rls.n:  # the filter moves only when a block is applied
+                self._cached = (self.rls.n, self.rls.payload_kg, self._std())
+            est = LiveEstimate(t, PHASES[ph], self._cached[1], self._cached[2],
                                valid or ph not in ESTIMATING)
         else:
             est = LiveEstimate(t, PHASES[ph], math.nan, math.nan, False)
@@ -202,6 +209,7 @@ class Engine:
             self.pass_index += 1
             self.pass_start = t
             self.rls = PayloadRls(self.noise, self.dt, self.cfg.rls)
+            self._cached = (-1, math.nan, math.nan)
             self.batch.clear()
             self.invalid_updates = 0
         elif prev == DIG:

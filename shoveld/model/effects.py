@@ -182,7 +182,7 @@ class SwingCentrifugal(ExtensionTerm):
     needs_swing = True
     defaults = {"R0_m": 4.5}
     search = {"R0_m": (0.0, 9.0)}
-    search_tol = {"R0_m": 0.05}
+    search_tol = {"R0_m": 0.1}
 
     def _w2(self, k: Kinematics) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return k.swing_rate**2, np.cos(k.th), np.sin(k.th)
@@ -331,7 +331,9 @@ class SensorTimeSkew(ExtensionTerm):
         return StreamDelay(names, delay) if delay > 0 else None
 
     def search_hyper(self, cal: Any, tables: list[Any]) -> None:
-        """Delay in whole samples: coarse grid, then halving steps around the best."""
+        """Delay in whole samples: start where the residual points (to first order a
+        delay tau leaves tau x dI/dt in the hoist current), then walk sample by sample
+        downhill on the fit's residual."""
         import copy
 
         if "delay_s" in self.given:
@@ -342,6 +344,7 @@ class SensorTimeSkew(ExtensionTerm):
         kmax = int(min(-lo, hi) / dt)
         tried: dict[int, float] = {}
         scale: list[np.ndarray] = []
+        first: list[Any] = []
 
         def objective(k: int) -> float:
             if k not in tried:
@@ -351,21 +354,39 @@ class SensorTimeSkew(ExtensionTerm):
                 rms = np.array(list(inner.params_.fit["residual_rms"].values()))
                 if not scale:
                     scale.append(rms)
+                    first.append(inner)
                 tried[k] = float(np.sum((rms / scale[0]) ** 2))
             return tried[k]
 
         objective(0)
-        step = max(1, kmax // 3)
-        for k in range(-3 * step, 3 * step + 1, step):
-            objective(k)
+        k = int(np.clip(round(self._implied_delay(first[0]) / dt), -kmax, kmax))
+        step = 1
+        while True:
+            here = objective(k)
+            better = [j for j in (k - step, k + step) if abs(j) <= kmax and objective(j) < here]
+            if not better:
+                break
+            k = min(better, key=objective)
         best = min(tried, key=tried.__getitem__)
-        while step > 1:
-            step = max(1, step // 2)
-            for k in (best - step, best + step):
-                if abs(k) <= kmax:
-                    objective(k)
-            best = min(tried, key=tried.__getitem__)
         self.hyper["delay_s"] = best * dt
+
+    @staticmethod
+    def _implied_delay(cal: Any) -> float:
+        """Slope of the hoist current residual on the rate of change of the current."""
+        p = cal.params_
+        num = den = 0.0
+        for f in cal.files_:
+            sel = f.use
+            if sel.sum() < 10:
+                continue
+            k = f.kin.take(sel)
+            e = cal.model.residual(k, p.values, f.payload[sel])[:, 0]
+            r = e / (-p.get("K_H") * k.d * k.sin_a3)
+            di = np.gradient(k.i_h_est, k.t)
+            ok = np.isfinite(r) & np.isfinite(di) & (np.diff(k.t, prepend=k.t[0]) < 0.1)
+            num += float(np.sum(r[ok] * di[ok]))
+            den += float(np.sum(di[ok] ** 2))
+        return num / den if den > 0 else 0.0
 
 
 @register_term

@@ -31,7 +31,9 @@ class SimEffect:
     magnitude_unit: ClassVar[str] = ""
     description: ClassVar[str] = ""
     typical_range: ClassVar[tuple[float, float]] = (0.0, 0.0)
-    """Magnitudes a real machine plausibly shows (the tests draw from this range)."""
+    """Magnitudes the tests and bench/diagnose_matrix.py draw from: physically plausible
+    and large enough to matter for the payload (below it the diagnosis may, honestly,
+    find nothing; see docs/diagnosis.md for the detection limits)."""
 
     def __init__(self, magnitude: float | None = None) -> None:
         self.magnitude = self.default_magnitude if magnitude is None else float(magnitude)
@@ -106,10 +108,10 @@ class FieldWeakeningEffect(SimEffect):
     """
 
     name = "hoist_field_weakening"
-    default_magnitude = 12.0
+    default_magnitude = 16.0
     magnitude_unit = "A (field forcing at 0.5 m/s^2 of hoist acceleration)"
     description = "hoist field forced while the hoist accelerates"
-    typical_range = (8.0, 16.0)
+    typical_range = (12.0, 20.0)
     ref_acc = 0.5
 
     def before_currents(self, ctx: dict[str, Any]) -> None:
@@ -206,10 +208,10 @@ class SensorTimeSkewEffect(SimEffect):
     """
 
     name = "sensor_time_skew"
-    default_magnitude = 80.0
+    default_magnitude = 120.0
     magnitude_unit = "ms (arm sensor late; negative: currents late)"
     description = "one sensor stream delayed against the others"
-    typical_range = (50.0, 160.0)
+    typical_range = (80.0, 160.0)
 
     def measure(self, cols: dict[str, np.ndarray], ctx: dict[str, Any],
                 rng: np.random.Generator) -> None:
@@ -269,11 +271,11 @@ class HoistRopeMassEffect(SimEffect):
     """
 
     name = "hoist_rope_mass"
-    default_magnitude = 60.0
+    default_magnitude = 120.0
     magnitude_unit = "kg/m (both hoist ropes)"
     description = "hoist rope weight between sheave and bail"
-    typical_range = (60.0, 150.0)
-    n_elements = 12
+    typical_range = (100.0, 160.0)
+    n_elements = 6
 
     def _energy(self, th: np.ndarray, d: np.ndarray, boom: np.ndarray, l_bs: float
                 ) -> np.ndarray:
@@ -319,10 +321,10 @@ class LoadDependentFrictionEffect(SimEffect):
     """
 
     name = "load_dependent_friction"
-    default_magnitude = 0.05
+    default_magnitude = 0.08
     magnitude_unit = "(friction coefficient)"
     description = "Coulomb friction growing with the payload"
-    typical_range = (0.04, 0.12)
+    typical_range = (0.06, 0.12)
     shaft_radius_m = 0.5
 
     def friction(self, ctx: dict[str, Any], fric: np.ndarray) -> np.ndarray:
@@ -354,10 +356,10 @@ class CurrentSaturationEffect(SimEffect):
     """
 
     name = "current_saturation"
-    default_magnitude = 0.06
+    default_magnitude = 0.12
     magnitude_unit = "(force deficit at 250 A per motor)"
     description = "force sub-linear in armature current"
-    typical_range = (0.04, 0.10)
+    typical_range = (0.1, 0.15)
     ref_a = 250.0
 
     def _i_sat(self) -> float:
@@ -399,10 +401,10 @@ class GroundSlopeEffect(SimEffect):
     """
 
     name = "ground_slope"
-    default_magnitude = 3.0
+    default_magnitude = 5.0
     magnitude_unit = "deg (ground slope)"
     description = "machine on a slope, inclinometer sees it"
-    typical_range = (2.0, 6.0)
+    typical_range = (4.0, 7.0)
     downhill_deg = 40.0
 
     def _tilt(self, swing: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
@@ -457,10 +459,10 @@ class BoomSuspensionSpringEffect(SimEffect):
     """
 
     name = "boom_suspension_spring"
-    default_magnitude = 0.75
+    default_magnitude = 2.0
     magnitude_unit = "deg (boom drop at 1 MN rope pull)"
     description = "boom angle moving with the rope load"
-    typical_range = (0.5, 1.5)
+    typical_range = (1.5, 3.0)
     iterations = 3
 
     @staticmethod
