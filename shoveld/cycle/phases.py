@@ -60,8 +60,8 @@ class PhaseMachine:
                crowd_rate_m_s: float = 0.0) -> int:
         """Advance with the current handle angle and rates; return the phase."""
         c = self.cfg
-        if any(math.isnan(x) for x in (th_deg, thd_deg_s, swing_rate_deg_s)):
-            return self.phase
+        if th_deg != th_deg or thd_deg_s != thd_deg_s or swing_rate_deg_s != swing_rate_deg_s:
+            return self.phase  # NaN: a joint is unknown, hold the phase
         moving = (abs(thd_deg_s) > c.idle_rate_deg_s or abs(swing_rate_deg_s) > c.idle_swing_deg_s
                   or abs(crowd_rate_m_s) > c.idle_crowd_m_s)
         if moving:

@@ -44,7 +44,10 @@ class FixedLagSavgol(Generic[T]):
              ) -> tuple[T, np.ndarray] | None:
         """Add a sample; once the window is full, return the centre sample's tag and a
         (3, n_signals) array of value, rate and acceleration. NaN or a time gap restarts."""
-        missing = any(math.isnan(v) for v in values)
+        missing = False
+        for v in values:
+            if v != v:  # NaN
+                missing = True
         if missing or (not math.isnan(self._last_t) and t - self._last_t > 1.5 * self.dt):
             self._count = 0
             self.tags.clear()
