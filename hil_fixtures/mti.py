@@ -131,7 +131,7 @@ class MtiEmulator:
                  send_wakeup: bool = True, outputs: tuple[tuple[int, int], ...] | None = None,
                  max_rate_hz: int = 400, garbage_probability: float = 0.0,
                  corrupt_probability: float = 0.0, seed: int = 0, tick_s: float = 0.002,
-                 status_word: int = 0x00000003) -> None:
+                 status_word: int = 0x00000003, t0: float | None = None) -> None:
         self.angles_at = angles_at
         self._own_dir: str | None = None
         if link is None:
@@ -165,7 +165,9 @@ class MtiEmulator:
         self._slave_path: str | None = None
         self._silent = False
         self._wakeup_t = 0.0
-        self._t0 = clock()
+        # Sample k is taken at t0 + k / rate on the clock. A virtual shovel passes its
+        # clock's origin so every emulator shares one time line with the table.
+        self._t0 = clock() if t0 is None else t0
         self._next_k = 0
         self._counter = 0
         self._drop = 0

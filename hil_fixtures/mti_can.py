@@ -37,7 +37,8 @@ class MtiCanEmulator:
                  messages: tuple[str, ...] = DEFAULT_MESSAGES,
                  clock: Callable[[], float] = time.monotonic, tick_s: float = 0.002,
                  status_word: int = 0x00000003,
-                 bus_factory: Callable[..., can.BusABC] = can.Bus) -> None:
+                 bus_factory: Callable[..., can.BusABC] = can.Bus,
+                 t0: float | None = None) -> None:
         self.angles_at = angles_at
         self.channel = channel
         self.interface = interface
@@ -54,7 +55,9 @@ class MtiCanEmulator:
         self._drop_kinds: set[str] = set()
         self._pending_error: int | None = None
         self._counter = 0
-        self._t0 = clock()
+        # Sample k is taken at t0 + k / rate on the clock. A virtual shovel passes its
+        # clock's origin so every emulator shares one time line with the table.
+        self._t0 = clock() if t0 is None else t0
         self._next_k = 0
         self._bus: can.BusABC | None = None
         self._stop = threading.Event()

@@ -133,13 +133,13 @@ class VirtualShovel:
             if mti == "serial":
                 from hil_fixtures.mti import MtiEmulator
 
-                self.mti = MtiEmulator(angles, clock=self.clock)
+                self.mti = MtiEmulator(angles, clock=self.clock, t0=0.0)
             else:
                 from hil_fixtures.mti_can import MtiCanEmulator
 
                 self.can_channel = f"vshovel-{uuid.uuid4().hex[:8]}"
                 self.mti = MtiCanEmulator(angles, self.can_channel, rate_hz=mti_rate_hz,
-                                          clock=self.clock)
+                                          clock=self.clock, t0=0.0)
 
     def start(self) -> VirtualShovel:
         started: list[Any] = []
