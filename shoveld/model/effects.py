@@ -274,6 +274,8 @@ class StreamDelay:
         self.names = names
         self.delay = delay_s
         self.buf: deque[tuple[float, tuple[float, ...]]] = deque()
+        self.dt = 0.0
+        """The latest sample interval (0 until there are two samples)."""
 
     def __call__(self, s: Any) -> Any:
         t = s.time_s
@@ -282,8 +284,9 @@ class StreamDelay:
         while len(self.buf) >= 2 and abs(self.buf[1][0] - want) <= abs(self.buf[0][0] - want):
             self.buf.popleft()
         t0, v0 = self.buf[0]
-        dt = (t - t0) / max(1, len(self.buf) - 1) if len(self.buf) > 1 else math.inf
-        if abs(t0 - want) > 0.5 * dt + 1e-9:
+        if len(self.buf) > 1:
+            self.dt = (self.buf[-1][0] - self.buf[-2][0])
+        if abs(t0 - want) > 0.5 * self.dt + 1e-9:
             v0 = tuple(math.nan for _ in self.names)
         return replace(s, **dict(zip(self.names, v0, strict=True)))
 

@@ -392,12 +392,14 @@ class CurrentSaturationEffect(SimEffect):
 class GroundSlopeEffect(SimEffect):
     """The crawlers stand on a slope; the house swings on a tilted axis.
 
-    The ground is tilted by ``magnitude`` degrees towards 40 degrees of swing. In the
-    house frame gravity gets an in-plane component along the arm, -g sin(pitch), and a
-    lateral one, both changing with the swing angle. The handle sensor measures
-    against true gravity (its angle is the elevation of the handle in 3D), the boom
-    angle stays deck-relative, and the cab inclinometer reads the house's pitch and
-    roll.
+    The ground is tilted by ``magnitude`` degrees towards 40 degrees of swing, so the
+    house's pitch and roll change as it swings. The arm's motion is prescribed in the
+    arm plane from the direction of gravity's part in that plane (the handle sensor is
+    gravity-referenced); that part is g times the cosine of the roll, and the boom,
+    fixed to the deck, has its sheave at the deck angle plus the deck's lean in the
+    plane (3D trigonometry, not a small-angle formula). The boom column stays
+    deck-relative, the handle sensor reads the handle's elevation above the true
+    horizontal, and the cab inclinometer reads pitch and roll.
     """
 
     name = "ground_slope"
@@ -407,26 +409,34 @@ class GroundSlopeEffect(SimEffect):
     typical_range = (4.0, 7.0)
     downhill_deg = 40.0
 
-    def _tilt(self, swing: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    def _tilt(self, swing: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """House pitch and roll (rad), and the deck's tilt in the arm plane seen from the
+        plane's own horizontal (the angle to add to the deck-relative boom)."""
         a = np.radians(self.magnitude)
         rel = np.radians(self.downhill_deg) - swing
         pitch = np.arcsin(np.sin(a) * np.cos(rel))
         roll = np.arcsin(np.sin(a) * np.sin(rel))
-        return pitch, roll, float(a)
+        # Gravity in the house frame is -g (sin pitch, cos a, -sin roll) on (x_H, y_H, z_H);
+        # its part in the arm plane (x_H, y_H) leans from -y_H by atan2(sin pitch, cos a),
+        # which is how far the deck (and the boom on it) is raised in that plane.
+        in_plane = np.arctan2(np.sin(pitch), np.cos(a))
+        return pitch, roll, in_plane
 
     def before_dynamics(self, ctx: dict[str, Any]) -> None:
         m = ctx["motion"]
-        pitch, _, a = self._tilt(m.swing)
-        ctx["gravity"] = np.stack([-9.81 * np.sin(pitch), -9.81 * np.cos(a) * np.ones_like(pitch)],
-                                  axis=-1)
+        _, roll, in_plane = self._tilt(m.swing)
+        ctx["boom_true"] = ctx.get("boom_true", m.boom) + in_plane
+        g = 9.81 * np.cos(roll)
+        ctx["gravity"] = np.stack([np.zeros_like(g), -g], axis=-1)
 
     def measure(self, cols: dict[str, np.ndarray], ctx: dict[str, Any],
                 rng: np.random.Generator) -> None:
         m = ctx["motion"]
         idx = ctx["sample_index"]
-        pitch, roll, a = self._tilt(m.swing[idx])
+        pitch, roll, _ = self._tilt(m.swing[idx])
         th = m.th[idx]
-        elev = np.arcsin(np.cos(th) * np.sin(pitch) + np.sin(th) * np.cos(a))
+        # The plane of the arm leans sideways by the roll: the handle's true elevation.
+        elev = np.arcsin(np.cos(roll) * np.sin(th))
         cols["handle_deg"] = cols["handle_deg"] + np.degrees(elev - th)
         cols["pitch_deg"] = cols["pitch_deg"] + np.degrees(pitch)
         cols["roll_deg"] = cols["roll_deg"] + np.degrees(roll)
