@@ -58,9 +58,13 @@ def replay(capture: Path, truck_target_kg: float) -> dict[str, list[dict[str, An
             rr.service.flush()
         finally:
             rr.close()
+    from drivers.capture.format import read_capture
+
+    t0 = float(read_capture(capture).start_unix)
     keep_p = ("pass", "truck", "payload_kg", "std_kg", "valid", "samples")
     keep_t = ("truck", "passes", "total_kg", "target_kg", "status")
-    return {"passes": [{k: p[k] for k in keep_p} for p in got["pass"]],
+    return {"passes": [{**{k: p[k] for k in keep_p}, "start_s": round(p["start"] - t0, 3),
+                        "end_s": round(p["end"] - t0, 3)} for p in got["pass"]],
             "trucks": [{k: t[k] for k in keep_t} for t in got["truck"] if t.get("closed")]}
 
 
