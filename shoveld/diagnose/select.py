@@ -2,7 +2,7 @@
 
 At each step every candidate not yet in the model is added on its own, identified,
 and judged pass by pass on data it was not fitted on (``shoveld.diagnose.fit``).
-Per pass, the difference of held-out losses (current model minus candidate) is one
+Per pass, the log ratio of held-out losses (current model over candidate) is one
 independent observation; their mean over the passes, against their spread, gives a
 one-sided t statistic. A candidate is significant when
 
@@ -12,7 +12,7 @@ one-sided t statistic. A candidate is significant when
   model's own approximations, e.g. its friction smoothing and the noise of the
   differentiated rates, are of about 1 % on simulated data without any hidden
   effect, and an extension smaller than that is not a finding);
-* it does not make the payload of the verified held-out passes worse (it pays).
+* it does not make the payload of the verified held-out passes clearly worse.
 
 The most effective significant candidate is added and the search repeats; it stops
 when none is significant ("nothing significant" is an answer).
@@ -38,9 +38,10 @@ class SelectionConfig:
     min_gain: float = 0.02
     """Smallest relative reduction of the held-out residual that counts as a finding."""
     max_effects: int = 3
-    payload_tolerance: float = 1.0
+    payload_tolerance: float = 1.25
     """A candidate may not raise the held-out payload mean-square error above this
-    multiple of the current model's (1: it must not be worse)."""
+    multiple of the current model's: a physical cause that the payload happens to
+    average out is still a finding, one that makes the payload clearly worse is not."""
 
 
 @dataclass
@@ -100,9 +101,11 @@ def compare(dataset: DataSet, cur: Evaluation, cand: Evaluation, name: str, n_tr
               and math.isfinite(cand.scores[p.index].loss)]
     l0 = np.array([cur.scores[p.index].loss for p in passes])
     l1 = np.array([cand.scores[p.index].loss for p in passes])
-    d = l0 - l1
-    n = len(d)
-    gain = float(d.mean() / l0.mean()) if n else math.nan
+    n = len(l0)
+    gain = float((l0 - l1).mean() / l0.mean()) if n else math.nan
+    # Per pass, the log of the loss ratio: scale-free, so a few heavy passes with large
+    # residuals do not swamp the spread (their improvements differ in size, not in sign).
+    d = np.log(l0 / l1)
     sd = float(d.std(ddof=1)) if n > 1 else math.nan
     t = float(d.mean() / (sd / math.sqrt(n))) if n > 1 and sd > 0 else (
         math.inf if n > 1 and d.mean() > 0 else -math.inf)

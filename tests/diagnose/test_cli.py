@@ -1,0 +1,66 @@
+"""``shoveld diagnose`` end to end on files, and the extended model in operation."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from shoveld.cli import main
+from shoveld.model.params import load_params
+from shoveld.signals.table import write_table
+from tests.diagnose.conftest import session
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    d = tmp_path_factory.mktemp("diag")
+    calib, measured, _ = session({"sensor_time_skew": 140.0}, 4242, passes=16)
+    out = {"c0": d / "c0.csv", "c1": d / "c1.csv", "ops": d / "ops.csv", "dir": d}
+    write_table(out["c0"], calib[0])
+    write_table(out["c1"], calib[1])
+    write_table(out["ops"], measured[0])
+    return out
+
+
+def test_diagnose_json_and_report(files: dict[str, Path], capsys: pytest.CaptureFixture[str]
+                                  ) -> None:
+    rep = files["dir"] / "report"
+    rc = main(["diagnose", "--calib", str(files["c0"]), str(files["c1"]), "--measured",
+               str(files["ops"]), "--json", "--report", str(rep)])
+    assert rc == 0
+    js = json.loads(capsys.readouterr().out)
+    assert js["found"] == ["sensor_time_skew"]
+    assert abs(js["extended"]["hyper"]["sensor_time_skew"]["delay_s"] - 0.14) <= 0.021
+    for key in ("found", "ranked", "base", "extended", "passes", "residuals_against"):
+        assert key in js
+    for tag in ("base", "extended"):
+        assert set(js[tag]["residual_rms"]) >= {"hoist_A", "crowd_A"}
+        pay = js[tag]["payload"]
+        assert set(pay) >= {"mean_kg", "rms_kg", "mean_pct_rated", "rms_pct_rated"}
+        assert js[tag]["payload_engine"]["passes"] > 0
+    assert js["extended"]["payload"]["rms_kg"] < js["base"]["payload"]["rms_kg"]
+    assert js["extended"]["payload_engine"]["rms_kg"] < js["base"]["payload_engine"]["rms_kg"]
+    assert {c["name"] for c in js["ranked"]} >= {"sensor_time_skew", "ground_slope"}
+    for name in ("report.md", "residual_vs_cause.png", "payload_per_pass.png",
+                 "residuals_overview.png", "extended.params.toml"):
+        assert (rep / name).stat().st_size > 0
+    text = (rep / "report.md").read_text()
+    assert "out of step" in text and "payload_per_pass.png" in text
+    p = load_params(rep / "extended.params.toml")
+    assert "sensor_time_skew" in p.terms
+
+
+def test_calibrate_and_estimate_take_the_extended_model(
+        files: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
+    out = files["dir"] / "skew.toml"
+    assert main(["calibrate", str(files["c0"]), str(files["c1"]), "--effects",
+                 "sensor_time_skew", "--out", str(out)]) == 0
+    p = load_params(out)
+    assert p.terms[-1] == "sensor_time_skew"
+    assert abs(p.hyper["sensor_time_skew"]["delay_s"] - 0.14) <= 0.021
+    capsys.readouterr()
+    assert main(["estimate", str(files["ops"]), "--params", str(out), "--json"]) == 0
+    passes = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert sum(1 for x in passes if x["valid"]) >= 12

@@ -1,0 +1,41 @@
+"""Hide an effect in simulated data; the diagnosis must name it and the gain must show.
+
+Each effect's magnitude and seed are drawn (per effect name) from the effect's
+typical range; ``bench/diagnose_matrix.py`` runs many seeds for the detection matrix.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from shoveld.diagnose import diagnose
+from shoveld.sim.effects import SIM_EFFECTS
+from tests.diagnose.conftest import draw, session
+
+
+@pytest.mark.parametrize("effect", sorted(SIM_EFFECTS))
+def test_hidden_effect_is_named_first_and_cuts_the_payload_error(effect: str) -> None:
+    mag, seed = draw(effect)
+    calib, measured, _ = session({effect: mag}, seed)
+    d = diagnose(calib, measured, engine=False)
+    assert d.found, f"{effect}={mag:.3g} (seed {seed}) not found"
+    assert d.found[0] == effect, f"{effect}={mag:.3g} (seed {seed}): found {d.found}"
+    base, ext = d.payload("base"), d.payload("extended")
+    assert ext["passes"] == base["passes"] > 5
+    assert ext["rms_kg"] < base["rms_kg"], (base, ext)
+
+
+def test_data_without_any_effect_gives_nothing() -> None:
+    calib, measured, _ = session({}, 424242)
+    d = diagnose(calib, measured, engine=False)
+    assert d.found == []
+    js = d.as_json()
+    assert js["found"] == [] and len(js["ranked"]) == len(SIM_EFFECTS)
+    assert js["base"]["payload"] == js["extended"]["payload"]
+
+
+def test_two_effects_are_both_found_larger_first() -> None:
+    # The centrifugal error of the swing is several times the rope weight's.
+    calib, measured, _ = session({"swing_centrifugal": 4.0, "hoist_rope_mass": 140.0}, 5150)
+    d = diagnose(calib, measured, engine=False)
+    assert d.found[:2] == ["swing_centrifugal", "hoist_rope_mass"], d.found
