@@ -508,6 +508,18 @@ class CurrentSaturation(ExtensionTerm):
         ic3 = k.i_c**3 / self.h("crowd_ref_a") ** 2
         return _stack((-ih3 * u_th, -ih3 * u_d), (np.zeros_like(ic3), ic3))
 
+    def shared_columns(self, k: Kinematics) -> dict[str, np.ndarray]:
+        """At held poses, the crowd column takes the crowd current's neighbour estimate.
+
+        The measured crowd current sits in the regressor, and its noise (errors in
+        variables) shrinks K_C by about 1 %; the cubic, nearly collinear with the linear
+        terms, would absorb that as false saturation. While the arm is held still the
+        current is steady, so its neighbour estimate is exact and noise-free there. In
+        prediction (``i_c_est`` = ``i_c``) the column is unchanged."""
+        held = (np.abs(k.thd) < np.radians(0.15)) & (np.abs(k.dd) < 0.004)
+        fix = np.where(held, k.i_c - k.i_c_est, 0.0)
+        return {"K_C": np.stack([np.zeros_like(fix), fix], axis=-1)}
+
     def derived(self, values: dict[str, float]) -> dict[str, float]:
         return {"hoist force deficit at the reference current":
                 values["K_H3"] / values["K_H"]}
