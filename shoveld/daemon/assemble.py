@@ -15,12 +15,13 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 from drivers.base import DriverHealth
-from shoveld.daemon.config import ADC_KINDS, LASER_KINDS, MTI_KINDS, DeviceConfig
+from shoveld.daemon.config import LASER_KINDS, MTI_KINDS, DeviceConfig
 from shoveld.daemon.store import ReadingStore, Stored
 from shoveld.installation import Installation, unwrap_deg, wrap_deg
-from shoveld.sample import Sample
+from shoveld.sample import SIGNAL_FIELDS, Sample
 from shoveld.signals.columns import BY_NAME
 
 ANGLE_KEYS = frozenset({"yaw_deg"})
@@ -57,8 +58,21 @@ def _interp(key: str, b: Stored, a: Stored | None, t: float) -> float:
     return vb + w * (va - vb)
 
 
+_MTI, _LASER, _ADC = 0, 1, 2
+_EMPTY: frozenset[str] = frozenset()
+_COL = {name: i for i, name in enumerate(SIGNAL_FIELDS)}
+"""Position of each signal in a Sample's positional arguments (time_s is 0)."""
+_NAN_ROW = [math.nan] * len(SIGNAL_FIELDS)
+
+
 class Assembler:
-    """Builds the engine's sample at each tick from the store."""
+    """Builds the engine's sample at each tick from the store.
+
+    A laser's or ADC module's contribution is a pure function of its newest reading,
+    so it is computed once per reading and reused while the device sends nothing new
+    (the staleness and connection checks still run at every tick). The MTi's is
+    recomputed at every tick because the unwrapped swing carries state.
+    """
 
     def __init__(self, devices: Mapping[str, DeviceConfig], installation: Installation,
                  store: ReadingStore,
@@ -69,71 +83,106 @@ class Assembler:
         self.health_of = health_of
         self.state: dict[str, DeviceState] = {n: DeviceState() for n in self.devices}
         self._swing_prev = math.nan
-        self.new_arrivals: list[float] = []
-        """Store-arrival times (host monotonic) of readings first used by the last tick."""
+        self.new_arrivals: list[tuple[str, float]] = []
+        """(device, store-arrival time, host monotonic) of the readings first used by the
+        last tick."""
+        self._plan: list[tuple[Any, ...]] = []
+        for name, dev in self.devices.items():
+            kind = (_MTI if dev.kind in MTI_KINDS else _LASER if dev.kind in LASER_KINDS
+                    else _ADC)
+            ranges = (tuple((sg, _COL[sg], *_RANGE[sg]) for sg in dev.signals)
+                      if kind == _ADC else ())
+            self._plan.append((name, dev, kind, self.state[name], ranges, dev.max_age_s,
+                               tuple(dev.signals), store.recent(name)))
+        self._cache: dict[str, tuple[Any, ...]] = {}
+        self._i_handle, self._i_swing, self._i_crowd = (_COL["handle_deg"], _COL["swing_deg"],
+                                                        _COL["crowd_m"])
 
     def sample(self, t: float) -> Sample:
-        values: dict[str, float] = {}
-        invalid: set[str] = set()
-        self.new_arrivals = []
-        for name, dev in self.devices.items():
-            self._device(t, name, dev, values, invalid)
-        for k in invalid:
-            values[k] = math.nan
-        return Sample(time_s=t, **values, invalid=frozenset(invalid))
-
-    @staticmethod
-    def _set(signal: str, v: float, values: dict[str, float], invalid: set[str]) -> None:
-        """Record a value, or mark it invalid when it is outside the column's range
-        (a unit or scaling mistake, a broken transducer)."""
-        lo, hi = _RANGE[signal]
-        if lo <= v <= hi:  # False for NaN too
-            values[signal] = v
-        else:
-            invalid.add(signal)
+        row = _NAN_ROW.copy()
+        row[0] = t
+        invalid: list[str] = []
+        arrivals: list[tuple[str, float]] = []
+        device = self._device
+        for plan in self._plan:
+            device(t, plan, row, invalid, arrivals)
+        self.new_arrivals = arrivals
+        return Sample(*row, invalid=frozenset(invalid) if invalid else _EMPTY)
 
     # -- per device -----------------------------------------------------------------------
-    def _device(self, t: float, name: str, dev: DeviceConfig, values: dict[str, float],
-                invalid: set[str]) -> None:
-        st = self.state[name]
+    def _device(self, t: float, plan: tuple[Any, ...], row: list[float], invalid: list[str],
+                arrivals: list[tuple[str, float]]) -> None:
+        name, dev, kind, st, ranges, max_age, signals, recent = plan
         health = self.health_of(name)
-        b, a = self.store.bracket(name, t)
-        if b is None and a is not None and a.reading.t_host - t <= dev.max_age_s:
-            b, a = a, None  # only a reading just after the tick: use it as is
+        b: Stored | None = recent[-1] if recent else None
+        a: Stored | None = None
+        if b is not None and b.reading.t_host > t:  # something arrived after the tick
+            b, a = self.store.bracket(name, t)
+            if b is None and a is not None and a.reading.t_host - t <= max_age:
+                b, a = a, None  # only a reading just after the tick: use it as is
         if b is None:
             st.state, st.age_s = ("disconnected" if health is not None and not health.connected
                                   else "no_data"), None
-            invalid.update(dev.signals)
+            invalid.extend(signals)
             return
-        age = max(0.0, t - b.reading.t_host) if a is None else 0.0
+        r = b.reading
+        age = t - r.t_host if a is None else 0.0
+        if age < 0.0:
+            age = 0.0
         st.age_s = age
         if b.seq > st.last_seq:
-            self.new_arrivals.append(b.arrived)
+            arrivals.append((name, b.arrived))
             st.last_seq = b.seq
         if health is not None and not health.connected:
             st.state = "disconnected"
-            invalid.update(dev.signals)
+            invalid.extend(signals)
             return
-        if age > dev.max_age_s:
+        if age > max_age:
             st.state = "stale"
-            invalid.update(dev.signals)
+            invalid.extend(signals)
             return
-        bad_before = len(invalid)
-        if dev.kind in MTI_KINDS:
-            self._mti(t, b, a, values, invalid)
-        elif dev.kind in LASER_KINDS:
-            self._one(t, b, a, "distance_m", "crowd_m", self.inst.crowd_m, values, invalid)
-        elif dev.kind in ADC_KINDS:
-            r = b.reading
-            vals, bad = r.values, r.invalid
-            for s in dev.signals:
+        if kind == _MTI:
+            self._mti(t, b, a, row, invalid, st)
+            return
+        if a is None:
+            cached = self._cache.get(name)
+            if cached is not None and cached[0] is b:
+                _, pairs, bad, st.invalid, st.state = cached
+                for i, v in pairs:
+                    row[i] = v
+                if bad:
+                    invalid.extend(bad)
+                return
+        pairs: list[tuple[int, float]] = []
+        bad: list[str] = []
+        if kind == _LASER:
+            v = self._raw(t, b, a, "distance_m")
+            if not math.isnan(v):
+                v = self.inst.crowd_m(v)
+            lo, hi = _RANGE["crowd_m"]
+            if lo <= v <= hi:  # False for NaN too
+                pairs.append((self._i_crowd, v))
+            else:
+                bad.append("crowd_m")
+        else:
+            vals, rbad = r.values, r.invalid
+            for sg, i, lo, hi in ranges:
                 if a is None:  # the common case: hold the latest reading
-                    v = vals.get(s, math.nan) if s not in bad else math.nan
+                    v = vals.get(sg, math.nan) if sg not in rbad else math.nan
                 else:
-                    v = self._raw(t, b, a, s)
-                self._set(s, v, values, invalid)
-        st.invalid = sorted(s for s in dev.signals if s in invalid)
-        st.state = "invalid" if len(invalid) > bad_before else "ok"
+                    v = self._raw(t, b, a, sg)
+                if lo <= v <= hi:  # False for NaN too; out of range: a unit or scaling
+                    pairs.append((i, v))  # mistake, a broken transducer
+                else:
+                    bad.append(sg)
+        for i, v in pairs:
+            row[i] = v
+        if bad:
+            invalid.extend(bad)
+        st.invalid = sorted(bad)
+        st.state = "invalid" if bad else "ok"
+        if a is None:
+            self._cache[name] = (b, tuple(pairs), tuple(bad), st.invalid, st.state)
 
     @staticmethod
     def _raw(t: float, b: Stored, a: Stored | None, key: str) -> float:
@@ -142,20 +191,33 @@ class Assembler:
             return math.nan
         return _interp(key, b, a, t)
 
-    def _one(self, t: float, b: Stored, a: Stored | None, key: str, signal: str,
-             fn: Callable[[float], float] | None, values: dict[str, float],
-             invalid: set[str]) -> None:
-        v = self._raw(t, b, a, key)
-        self._set(signal, fn(v) if fn is not None and not math.isnan(v) else v, values, invalid)
-
-    def _mti(self, t: float, b: Stored, a: Stored | None, values: dict[str, float],
-             invalid: set[str]) -> None:
-        pitch = self._raw(t, b, a, "pitch_deg")
-        self._set("handle_deg", self.inst.handle_deg(pitch), values, invalid)
-        yaw = self._raw(t, b, a, "yaw_deg")
+    def _mti(self, t: float, b: Stored, a: Stored | None, row: list[float],
+             invalid: list[str], st: DeviceState) -> None:
+        r = b.reading
+        vals, rbad = r.values, r.invalid
+        if a is None:
+            pitch = vals.get("pitch_deg", math.nan) if "pitch_deg" not in rbad else math.nan
+            yaw = vals.get("yaw_deg", math.nan) if "yaw_deg" not in rbad else math.nan
+        else:
+            pitch = self._raw(t, b, a, "pitch_deg")
+            yaw = self._raw(t, b, a, "yaw_deg")
+        bad: list[str] = []
+        handle = self.inst.handle_deg(pitch)
+        lo, hi = _RANGE["handle_deg"]
+        if lo <= handle <= hi:
+            row[self._i_handle] = handle
+        else:
+            bad.append("handle_deg")
         if math.isnan(yaw):
-            invalid.add("swing_deg")
+            bad.append("swing_deg")
         else:
             sw = unwrap_deg(self._swing_prev, self.inst.swing_deg(yaw))
             self._swing_prev = sw
-            values["swing_deg"] = sw  # unwrapped: a count of turns, not range-checked
+            row[self._i_swing] = sw  # unwrapped: a count of turns, not range-checked
+        if bad:
+            invalid.extend(bad)
+            st.invalid = bad
+            st.state = "invalid"
+        else:
+            st.invalid = []
+            st.state = "ok"

@@ -70,6 +70,10 @@ class LoopConfig:
     health_period_s: float = 1.0
     watchdog_max_late_s: float = 2.0
     """No watchdog ping while the loop is this far behind its schedule."""
+    sync: str = "none"
+    """Device whose readings the ticks are phase-locked to (``none``: free-running)."""
+    sync_delay_s: float = 0.001
+    """With ``sync``: ticks fall this long after the master's readings arrive."""
 
 
 @dataclass(frozen=True)
@@ -315,6 +319,38 @@ def check_coverage(where: str, devices: Mapping[str, DeviceConfig]) -> None:
                           "channels named hoist1_a, hoist2_a, hoist_field_a, crowd_a)")
 
 
+def device_rate_hz(dev: DeviceConfig) -> float | None:
+    """The rate a device is configured to deliver readings at, where its config says."""
+    d = dev.driver
+    try:
+        if dev.kind == "mti_serial":
+            return float(d.get("rate_hz", 100))
+        if dev.kind in LASER_KINDS:
+            return 1e6 / float(d.get("sample_interval_us", 20000))
+        if dev.kind in ADC_KINDS:
+            return float(d.get("poll_hz", 50.0))
+    except (TypeError, ValueError, ZeroDivisionError):
+        return None
+    return None  # mti_can: the rate is set in the device, not in this file
+
+
+def check_sync(where: str, loop: LoopConfig, devices: Mapping[str, DeviceConfig]) -> None:
+    """``loop.sync`` names a device whose rate the loop rate is a whole multiple of."""
+    if loop.sync == "none":
+        return
+    if loop.sync not in devices:
+        raise ConfigError(f"{where}: key 'loop.sync' must be \"none\" or a device name (one "
+                          f"of {sorted(devices)}), got {loop.sync!r}")
+    rate = device_rate_hz(devices[loop.sync])
+    if rate is not None:
+        ratio = loop.rate_hz / rate
+        if ratio < 1.0 - 1e-9 or abs(ratio - round(ratio)) > 1e-6:
+            raise ConfigError(
+                f"{where}: key 'loop.sync': device '{loop.sync}' delivers {rate:g} readings/s; "
+                f"the phase lock needs a loop rate ({loop.rate_hz:g} Hz) that is a whole "
+                "multiple of it")
+
+
 # -- the file ------------------------------------------------------------------------------
 
 def _check_zenoh_extra(where: str, extra: Mapping[str, Any]) -> None:
@@ -354,7 +390,10 @@ def parse_config(doc: Mapping[str, Any], where: str = "<config>",
                       max_age_s=lp.number("max_age_s", 0.25, positive=True),
                       ready_timeout_s=lp.number("ready_timeout_s", 10.0, lo=0.0),
                       health_period_s=lp.number("health_period_s", 1.0, positive=True),
-                      watchdog_max_late_s=lp.number("watchdog_max_late_s", 2.0, positive=True))
+                      watchdog_max_late_s=lp.number("watchdog_max_late_s", 2.0, positive=True),
+                      sync=lp.string("sync", "none"))
+    loop = dataclasses.replace(loop, sync_delay_s=lp.number(
+        "sync_delay_s", 0.001, lo=0.0, hi=0.5 / loop.rate_hz))
     lp.done()
 
     zr = _Reader(where, top.table("zenoh"), "zenoh.")
@@ -416,6 +455,8 @@ def parse_config(doc: Mapping[str, Any], where: str = "<config>",
         devices = parse_devices(where, devs_t, loop.max_age_s, check_drivers)
     else:
         devices = {}
+    if devices:
+        check_sync(where, loop, devices)
     top.done()
     return DaemonConfig(path=None, shovel_id=shovel_id, params_path=params, state_dir=state_dir,
                         loop=loop, zenoh=zc, installation=inst, engine=engine, devices=devices,

@@ -24,7 +24,7 @@ from shoveld.daemon.assemble import Assembler
 from shoveld.daemon.clock import Clock, MonotonicClock
 from shoveld.daemon.config import DaemonConfig, build_driver
 from shoveld.daemon.health import LatencyStats, RateMeter, driver_health, problems
-from shoveld.daemon.loop import FixedRateLoop, LoopStats
+from shoveld.daemon.loop import FixedRateLoop, LoopStats, PhaseLock
 from shoveld.daemon.notify import Notifier
 from shoveld.daemon.persist import PassLog, db_path
 from shoveld.daemon.publisher import Publisher
@@ -38,6 +38,12 @@ log = logging.getLogger(__name__)
 
 def _r(x: float, nd: int) -> float | None:
     return round(x, nd) if math.isfinite(x) else None
+
+
+JOINT_SIGNALS = frozenset({"swing_deg", "handle_deg", "crowd_m", "boom_deg"})
+"""Signals of the ``joints`` message: a reading of a device that provides one of them
+shows first there; other readings (motor currents) first in ``payload/live``."""
+MAX_PENDING_ARRIVALS = 2000
 
 
 class Service:
@@ -62,15 +68,20 @@ class Service:
         self.drivers: dict[str, Driver] = drivers if drivers is not None else {
             name: build_driver(dev, self.driver_clock) for name, dev in cfg.devices.items()}
         self.assembler = Assembler(cfg.devices, cfg.installation, self.store,
-                                   lambda n: self._health_of(n))
+                                   self._health_of)
         self.publisher = publisher or Publisher(cfg.zenoh, cfg.shovel_id, self.status)
         self.publisher.status = self.status
         self.notifier = notifier or Notifier()
         self.loop_stats = LoopStats(keep_all=record_stats)
         self.latency = LatencyStats(keep_all=record_stats)
+        """Arrival (store) -> publish of every reading, all devices."""
+        self.latency_by_device = {n: LatencyStats(keep_all=record_stats) for n in cfg.devices}
+        self._joint_devices = frozenset(n for n, d in cfg.devices.items()
+                                        if JOINT_SIGNALS.intersection(d.signals))
         self.rates = RateMeter()
+        self.phase_lock = self._make_phase_lock()
         self.loop = FixedRateLoop(self.clock, cfg.loop.rate_hz, self._safe_tick,
-                                  self.loop_stats)
+                                  self.loop_stats, self.phase_lock)
         self.tick_errors = 0
         self._consecutive_errors = 0
         self.passlog: PassLog | None = None
@@ -87,17 +98,55 @@ class Service:
         self._joints_every = max(1, round(cfg.loop.rate_hz / cfg.zenoh.joints_rate_hz))
         self._live_every = max(1, round(cfg.loop.rate_hz / cfg.zenoh.live_rate_hz))
         self._next_health = -math.inf
-        self._pending_arrivals: list[float] = []
+        self._pending_arrivals: list[tuple[str, float]] = []
         self._prev_overruns = 0
         self._prev_ticks = 0
         # snapshots for the status query (replaced whole, read from Zenoh's thread)
-        self.live_msg: dict[str, Any] | None = None
+        self._live: tuple[LiveEstimate, int, int] | None = None
+        self._live_built: tuple[Any, dict[str, Any]] | None = None
         self.truck_msg: dict[str, Any] | None = None
         self.truck_passes: list[dict[str, Any]] = []
         self.last_pass: dict[str, Any] | None = None
         self.health_msg: dict[str, Any] | None = None
         self.on_event: Callable[[str, dict[str, Any]], None] | None = None
         """Called from the pass-log thread after a pass/truck is committed (tests, bench)."""
+
+    def _make_phase_lock(self) -> PhaseLock | None:
+        """The PLL of ``[loop] sync``: live clocks only. On a simulated clock (replay,
+        tests) readings are stamped with the tick times themselves, so there is no
+        arrival phase to lock to, and the tick grid must stay the capture's."""
+        lc = self.cfg.loop
+        if lc.sync == "none":
+            return None
+        if self.clock.simulated:
+            log.info("loop.sync = %r not used on a simulated clock", lc.sync)
+            return None
+        dev = self.cfg.devices.get(lc.sync)
+        if dev is None:
+            log.warning("loop.sync: no device %r here; the loop runs free", lc.sync)
+            return None
+        name = dev.name
+        latest_t = self.store.latest_t
+        return PhaseLock(1.0 / lc.rate_hz, lambda: latest_t(name), delay_s=lc.sync_delay_s,
+                         lost_after_s=dev.max_age_s)
+
+    @property
+    def live_msg(self) -> dict[str, Any] | None:
+        """The newest ``payload/live`` message (built when asked, not at every tick)."""
+        live = self._live
+        if live is None:
+            return None
+        built = self._live_built
+        if built is not None and built[0] is live:
+            return built[1]
+        ev, pass_index, truck_index = live
+        valid = bool(ev.valid and math.isfinite(ev.payload_kg))
+        msg = {"time": round(self.clock.wall(ev.time_s), 3),
+               "payload_kg": _r(ev.payload_kg, 1) if valid else None,
+               "std_kg": _r(ev.std_kg, 1) if valid else None,
+               "phase": ev.phase, "valid": valid, "pass": pass_index, "truck": truck_index}
+        self._live_built = (live, msg)
+        return msg
 
     # -- lifecycle ---------------------------------------------------------------------------
     def _health_of(self, name: str) -> Any:
@@ -195,30 +244,29 @@ class Service:
         if self.before_tick is not None:
             self.before_tick(t)
         s = self.assembler.sample(t)
-        self._pending_arrivals.extend(self.assembler.new_arrivals)
-        for ev in engine.step(s):
-            self._event(ev, t)
+        pending = self._pending_arrivals
+        if self.assembler.new_arrivals:
+            pending.extend(self.assembler.new_arrivals)
+            if len(pending) > MAX_PENDING_ARRIVALS:  # nothing published for a while
+                del pending[:-MAX_PENDING_ARRIVALS]
         k = self._tick_no
         self._tick_no += 1
-        wall = self.clock.wall(t)
-        published = False
+        # joints first: they need only the sample, not the engine's step
         if k % self._joints_every == 0:
             bad = s.invalid
-            published |= self.publisher.put("joints", {
-                "time": round(wall, 3),
-                "swing_deg": None if "swing_deg" in bad else _r(s.swing_deg, 3),
-                "handle_deg": None if "handle_deg" in bad else _r(s.handle_deg, 3),
-                "crowd_m": None if "crowd_m" in bad else _r(s.crowd_m, 4),
-                "boom_deg": None if "boom_deg" in bad else _r(s.boom_deg, 3),
-                "invalid": sorted(bad)})
-        if k % self._live_every == 0 and self.live_msg is not None:
-            published |= self.publisher.put("payload/live", self.live_msg)
-        if published and self._pending_arrivals:
-            if not self.clock.simulated:
-                now = time.monotonic()
-                for a in self._pending_arrivals:
-                    self.latency.add(now - a)
-            self._pending_arrivals = []
+            if self.publisher.put("joints", {
+                    "time": round(self.clock.wall(t), 3),
+                    "swing_deg": None if "swing_deg" in bad else _r(s.swing_deg, 3),
+                    "handle_deg": None if "handle_deg" in bad else _r(s.handle_deg, 3),
+                    "crowd_m": None if "crowd_m" in bad else _r(s.crowd_m, 4),
+                    "boom_deg": None if "boom_deg" in bad else _r(s.boom_deg, 3),
+                    "invalid": sorted(bad) if bad else []}) and pending:
+                self._published(True)
+        for ev in engine.step(s):
+            self._event(ev, t)
+        if k % self._live_every == 0 and self._live is not None:
+            if self.publisher.put("payload/live", self.live_msg) and self._pending_arrivals:
+                self._published(False)
         if t >= self._next_health:
             self._next_health = t + self.cfg.loop.health_period_s
             self._publish_health(t)
@@ -233,6 +281,26 @@ class Service:
         if self._healthy():
             self.notifier.watchdog()
 
+    def _published(self, joints_only: bool) -> None:
+        """A message went out: the readings waiting for it have had their effect."""
+        pending = self._pending_arrivals
+        if self.clock.simulated:
+            self._pending_arrivals = []
+            return
+        now = time.monotonic()
+        keep: list[tuple[str, float]] = []
+        joint_devices = self._joint_devices
+        by_device = self.latency_by_device
+        for name, arrived in pending:
+            if joints_only and name not in joint_devices:
+                keep.append((name, arrived))
+                continue
+            self.latency.add(now - arrived)
+            st = by_device.get(name)
+            if st is not None:
+                st.add(now - arrived)
+        self._pending_arrivals = keep
+
     def _healthy(self) -> bool:
         """Watchdog pings only while the loop keeps its schedule and the pass log lives."""
         return (self.loop.behind_s < self.cfg.loop.watchdog_max_late_s
@@ -244,12 +312,7 @@ class Service:
         engine = self.engine
         assert engine is not None
         if isinstance(ev, LiveEstimate):
-            valid = bool(ev.valid and math.isfinite(ev.payload_kg))
-            self.live_msg = {"time": round(wall(ev.time_s), 3),
-                             "payload_kg": _r(ev.payload_kg, 1) if valid else None,
-                             "std_kg": _r(ev.std_kg, 1) if valid else None,
-                             "phase": ev.phase, "valid": valid, "pass": engine.pass_index,
-                             "truck": engine.truck.index}
+            self._live = (ev, engine.pass_index, engine.truck.index)
         elif isinstance(ev, PassResult):
             self._q.put(("pass", ev.as_dict(), wall(ev.start_s), wall(ev.end_s)))
         elif isinstance(ev, TruckResult):
@@ -359,6 +422,11 @@ class Service:
         self._prev_overruns = self.loop_stats.overruns
         self._prev_ticks = self.loop_stats.ticks
         loop["publish_latency_ms"] = self.latency.as_dict()
+        loop["publish_latency_by_device_ms"] = {n: st.as_dict()
+                                                for n, st in self.latency_by_device.items()}
+        pll = self.phase_lock
+        loop["sync"] = ({"device": self.cfg.loop.sync, **pll.as_dict()} if pll is not None
+                        else {"device": self.cfg.loop.sync, "state": "off"})
         loop["tick_errors"] = self.tick_errors
         loop["failing_now"] = self._consecutive_errors
         zen = self.publisher.health()

@@ -57,15 +57,34 @@ class ReadingStore:
 
     def bracket(self, device: str, t: float) -> tuple[Stored | None, Stored | None]:
         """(latest reading at or before ``t``, earliest reading after ``t``)."""
+        recent = self._recent[device]
+        try:
+            newest = recent[-1]  # atomic: no lock needed to peek at the newest
+        except IndexError:
+            return None, None
+        if newest.reading.t_host <= t:  # the usual case: nothing arrived after the tick
+            return newest, None
         before: Stored | None = None
         after: Stored | None = None
         with self._lock:
-            for s in reversed(self._recent[device]):
+            for s in reversed(recent):
                 if s.reading.t_host <= t:
                     before = s
                     break
                 after = s
         return before, after
+
+    def recent(self, device: str) -> deque[Stored]:
+        """The device's recent readings, oldest first (read-only for the caller; iterate
+        under no circumstances without the lock: driver threads append to it)."""
+        return self._recent[device]
+
+    def latest_t(self, device: str) -> float | None:
+        """Reading time (``t_host``) of the newest reading of ``device``, None before any."""
+        try:
+            return self._recent[device][-1].reading.t_host
+        except IndexError:
+            return None
 
     def count(self, device: str) -> int:
         """Readings received from ``device`` since start (for its sample rate)."""

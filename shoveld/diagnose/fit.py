@@ -68,6 +68,8 @@ class PassScore:
     payload_kg: float
     """The model's estimate from the pass's lift and swing (offline, least squares)."""
     samples: int
+    calib_std_kg: float = 0.0
+    """Payload std that the calibration's parameter uncertainty alone causes."""
 
 
 @dataclass
@@ -162,7 +164,12 @@ def score_pass(params: ModelParams, dataset: DataSet, p: Pass, sigma0: np.ndarra
     m_hat = float(np.sum(a * b) / np.sum(a * a))
     m = p.payload_kg if p.verified else m_hat
     e = m * a - b
-    return PassScore(float(np.mean(np.sum(e * e, axis=1))), m_hat, int(ok.sum()))
+    # How far the calibration's own uncertainty moves this estimate (as the engine's
+    # param_std_kg): m = sum(a b) / sum(a a), and b moves with the parameters.
+    db = -(w[ok] + m_hat * psi[ok]) / scale[ok][:, :, None]
+    g = np.einsum("ke,kep->p", a, db) / np.sum(a * a)
+    cal = math.sqrt(max(0.0, float(g @ params.cov @ g)))
+    return PassScore(float(np.mean(np.sum(e * e, axis=1))), m_hat, int(ok.sum()), cal)
 
 
 def evaluate(dataset: DataSet, effects: list[str], hyper: dict[str, dict[str, Any]],

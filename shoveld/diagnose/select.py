@@ -12,7 +12,8 @@ one-sided t statistic. A candidate is significant when
   model's own approximations, e.g. its friction smoothing and the noise of the
   differentiated rates, are of about 1 % on simulated data without any hidden
   effect, and an extension smaller than that is not a finding);
-* it does not make the payload of the verified held-out passes clearly worse.
+* it does not make the payload of the verified held-out passes worse by more than
+  twice the payload uncertainty of its own calibration.
 
 The most effective significant candidate is added and the search repeats; it stops
 when none is significant ("nothing significant" is an answer).
@@ -38,10 +39,11 @@ class SelectionConfig:
     min_gain: float = 0.02
     """Smallest relative reduction of the held-out residual that counts as a finding."""
     max_effects: int = 3
-    payload_tolerance: float = 1.25
-    """A candidate may not raise the held-out payload mean-square error above this
-    multiple of the current model's: a physical cause that the payload happens to
-    average out is still a finding, one that makes the payload clearly worse is not."""
+    payload_tolerance: float = 2.0
+    """A candidate may not raise the held-out payload RMS error by more than this many
+    times the payload uncertainty its own calibration implies: a physical cause whose
+    payload effect is lost in the calibration's noise is still a finding, one that
+    makes the payload clearly worse is not."""
 
 
 @dataclass
@@ -114,13 +116,19 @@ def compare(dataset: DataSet, cur: Evaluation, cand: Evaluation, name: str, n_tr
     e1 = np.array([cand.scores[p.index].payload_kg - p.payload_kg for p in passes
                    if p.verified])
     ratio = float(np.mean(e1**2) / np.mean(e0**2)) if len(e0) else math.nan
+    # The payload may move by its calibration uncertainty (common to all passes, so not
+    # averaged away) without counting against the model.
+    cal = float(np.mean([cand.scores[p.index].calib_std_kg for p in passes if p.verified])
+                ) if len(e0) else 0.0
+    worse = _rms(e1) - _rms(e0) if len(e0) else 0.0
     why = ""
     if not (t > t_crit):
         why = f"not significant (t {t:.2f} <= {t_crit:.2f})"
     elif not (gain >= cfg.min_gain):
         why = f"too small ({100 * gain:.1f} % < {100 * cfg.min_gain:.0f} % of the residual)"
-    elif len(e0) and not (ratio <= cfg.payload_tolerance):
-        why = f"does not pay (held-out payload error x{math.sqrt(ratio):.2f})"
+    elif len(e0) and worse > cfg.payload_tolerance * cal:
+        why = (f"does not pay (held-out payload RMS {worse:+.0f} kg, more than "
+               f"{cfg.payload_tolerance:g} x its calibration uncertainty {cal:.0f} kg)")
     hyper = {k: v for k, v in cand.hyper().get(name, {}).items()}
     return CandidateScore(name, gain, t, t_crit, n, _rms(e1),
                           float(e1.mean()) if len(e1) else math.nan, ratio, not why, why,

@@ -208,10 +208,10 @@ class SensorTimeSkewEffect(SimEffect):
     """
 
     name = "sensor_time_skew"
-    default_magnitude = 120.0
+    default_magnitude = 160.0
     magnitude_unit = "ms (arm sensor late; negative: currents late)"
     description = "one sensor stream delayed against the others"
-    typical_range = (80.0, 160.0)
+    typical_range = (140.0, 220.0)
 
     def measure(self, cols: dict[str, np.ndarray], ctx: dict[str, Any],
                 rng: np.random.Generator) -> None:
