@@ -12,8 +12,8 @@ one-sided t statistic. A candidate is significant when
   model's own approximations, e.g. its friction smoothing and the noise of the
   differentiated rates, are of about 1 % on simulated data without any hidden
   effect, and an extension smaller than that is not a finding);
-* it does not make the payload of the verified held-out passes worse by more than
-  twice the payload uncertainty of its own calibration.
+* (optionally) it does not make the payload of the verified held-out passes worse by
+  more than a multiple of the payload uncertainty of its own calibration.
 
 The most effective significant candidate is added and the search repeats; it stops
 when none is significant ("nothing significant" is an answer).
@@ -39,11 +39,11 @@ class SelectionConfig:
     min_gain: float = 0.02
     """Smallest relative reduction of the held-out residual that counts as a finding."""
     max_effects: int = 3
-    payload_tolerance: float = 2.0
-    """A candidate may not raise the held-out payload RMS error by more than this many
-    times the payload uncertainty its own calibration implies: a physical cause whose
-    payload effect is lost in the calibration's noise is still a finding, one that
-    makes the payload clearly worse is not."""
+    payload_tolerance: float = math.inf
+    """If finite, a candidate may not raise the held-out payload RMS error by more than
+    this many times the payload uncertainty its own calibration implies. Off by
+    default: two effects whose payload errors partly cancel would each look as if
+    they did not pay until both are in the model; the payload is reported instead."""
 
 
 @dataclass
@@ -176,6 +176,4 @@ def forward_select(dataset: DataSet, library: list[str], sigma0: np.ndarray,
         if chosen is None:
             break
         current = [*current, chosen]
-        # Later steps re-try only the candidates that helped at all on their own.
-        tried = [s.name for s in scores if s.gain > 0 or s.name == chosen]
     return Selection(list(current), steps, base, ev(current), cache)
