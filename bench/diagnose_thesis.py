@@ -11,7 +11,7 @@ opposite sign where the sign is physical (a negative delay, field weakening inst
 of forcing, a centre of gravity behind the bail). Prints, per effect, the three
 errors next to the thesis's and whether the signs match.
 
-    .venv/bin/python bench/diagnose_thesis.py [--passes 6] [--seeds 2]
+    .venv/bin/python bench/diagnose_thesis.py [--passes 6] [--seeds 2] [--only-pairs]
 """
 
 from __future__ import annotations
@@ -79,6 +79,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--passes", type=int, default=6)
     ap.add_argument("--seeds", type=int, default=2)
+    ap.add_argument("--only-pairs", action="store_true")
     args = ap.parse_args()
     from shoveld.sim.effects import SIM_EFFECTS
 
@@ -88,6 +89,12 @@ def main() -> None:
         cases.append((f"{name}={mag:g}", {name: mag}))
         if name in SIGNED:
             cases.append((f"{name}={-mag:g}", {name: -mag}))
+    # A pair that could: a load-independent over-read (the currents late against the
+    # arm) with a load-proportional under-read (the load's centre behind the bail).
+    cases.append(("sensor_time_skew=-80 + payload_cog_offset=-1.6",
+                  {"sensor_time_skew": -80.0, "payload_cog_offset": -1.6}))
+    if args.only_pairs:
+        cases = cases[-1:]
     keys = list(THESIS)
     print(f"{'hidden effect':34s}" + "".join(f"{k:>14s}" for k in keys) + "  signs as thesis")
     print(f"{'thesis (P&H 2100, Sarcheshmeh)':34s}"
