@@ -8,12 +8,20 @@ every ``joints`` message it receives. Figures:
 
 * tick jitter: wake-up lateness against each absolute deadline (p50, p99, max);
 * arrival -> publish: from a reading reaching the daemon's store to the put of the
-  first message computed from it (includes the wait for the next tick, 0-10 ms);
+  first message computed from it (``joints`` for the arm sensors and the boom
+  inclinometer, ``payload/live`` for the motor currents), for the phase-lock master
+  (``--sync``, default the MTi) and for the other sensors separately. The others are
+  not locked, so they wait 0-10 ms for the next tick: bounded by one period;
 * tick -> subscriber: from the tick's deadline to the other process receiving the
   message (processing + Zenoh over loopback);
-* CPU: this process's CPU seconds per second (drivers, loop, engine, Zenoh).
+* CPU: this process's CPU seconds per second (drivers, loop, engine, Zenoh), and per
+  thread (``/proc/self/task/*/schedstat``: driver threads, the loop, Zenoh's threads);
+* ``--profile``: py-spy (``pip install py-spy``) samples the thread holding the GIL
+  during the run and the top functions are printed (``--profile-out`` keeps the raw
+  samples for a flame graph).
 
-Usage: ``.venv/bin/python bench/daemon_live.py [--seconds 60] [--json]``
+Usage: ``.venv/bin/python bench/daemon_live.py [--seconds 60] [--sync mti|none]
+[--publish-rate 10] [--profile] [--json]``
 """
 
 from __future__ import annotations
@@ -75,6 +83,80 @@ def pct(v: list[float] | np.ndarray, scale: float = 1e3) -> dict[str, float]:
             "max": round(float(a.max()), 3), "n": int(a.size)}
 
 
+def thread_cpu_s() -> dict[int, float]:
+    """CPU seconds of every thread of this process so far (kernel scheduler statistics)."""
+    out: dict[int, float] = {}
+    for task in Path("/proc/self/task").iterdir():
+        try:
+            out[int(task.name)] = int((task / "schedstat").read_text().split()[0]) / 1e9
+        except (OSError, ValueError, IndexError):
+            pass
+    return out
+
+
+def thread_names() -> dict[int, str]:
+    names = {t.native_id: t.name for t in threading.enumerate() if t.native_id is not None}
+    for task in Path("/proc/self/task").iterdir():
+        tid = int(task.name)
+        if tid not in names:
+            try:
+                names[tid] = "native:" + (task / "comm").read_text().strip()
+            except OSError:
+                names[tid] = f"native:{tid}"
+    return names
+
+
+def cpu_by_thread(before: dict[int, float], after: dict[int, float], wall: float
+                  ) -> dict[str, float]:
+    """Percent of one core per thread name (Zenoh's native threads grouped by name)."""
+    names = thread_names()
+    out: dict[str, float] = {}
+    for tid, t1 in after.items():
+        name = names.get(tid, f"native:{tid}")
+        if name.startswith("native:"):
+            name = "zenoh/native " + name[7:].rstrip("0123456789-_")
+        out[name] = out.get(name, 0.0) + 100.0 * (t1 - before.get(tid, 0.0)) / wall
+    return {k: round(v, 2) for k, v in sorted(out.items(), key=lambda kv: -kv[1])
+            if v >= 0.005}
+
+
+def start_py_spy(seconds: float, out: str) -> subprocess.Popen[bytes] | None:
+    exe = Path(sys.executable).with_name("py-spy")
+    if not exe.exists():
+        print("--profile: py-spy not installed (pip install py-spy)", file=sys.stderr)
+        return None
+    return subprocess.Popen([str(exe), "record", "-p", str(os.getpid()), "-d",
+                             str(max(1, int(seconds))), "-r", "250", "--gil", "--threads",
+                             "--nonblocking", "-f", "raw", "-o", out],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+
+def summarize_py_spy(path: str, top: int = 25) -> list[tuple[float, str]]:
+    """Inclusive share of the GIL-holding samples per function (thread names kept)."""
+    import collections
+    import re
+
+    total = 0
+    incl: collections.Counter[str] = collections.Counter()
+    for line in Path(path).read_text().splitlines():
+        stack, _, n = line.rpartition(" ")
+        if not stack:
+            continue
+        count = int(n)
+        total += count
+        frames = stack.split(";")
+        thread = re.sub(r"\s*\(.*?\)", "", frames[0]).replace("thread ", "").strip()
+        seen = {f"[thread {thread}]"}
+        incl[f"[thread {thread}]"] += count
+        for fr in frames[1:]:
+            key = re.sub(r" \((?:.*/site-packages/|.*/python3\.\d+/|" + re.escape(str(ROOT))
+                         + r"/)?(.*?):\d+\)$", r" (\1)", fr)
+            if key not in seen:
+                seen.add(key)
+                incl[key] += count
+    return [(round(100.0 * v / total, 1), k) for k, v in incl.most_common(top)] if total else []
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=60.0)
@@ -82,6 +164,11 @@ def main() -> int:
     ap.add_argument("--publish-rate", type=float, default=None,
                     help="joints and live payload rate (default: every tick, so the latency "
                          "figure is not stretched by decimation; the service default is 10)")
+    ap.add_argument("--sync", default="mti",
+                    help="[loop] sync: the device the ticks are phase-locked to, or 'none'")
+    ap.add_argument("--sync-delay", type=float, default=0.001, help="[loop] sync_delay_s")
+    ap.add_argument("--profile", action="store_true", help="py-spy the run (GIL holder)")
+    ap.add_argument("--profile-out", default=None, help="keep py-spy's raw samples here")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
 
@@ -100,7 +187,8 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as tmp:
         cfg = parse_config({
             "shovel": {"id": "bench", "params": str(PARAMS), "state_dir": tmp},
-            "loop": {"rate_hz": args.rate},
+            "loop": {"rate_hz": args.rate, "sync": args.sync,
+                     "sync_delay_s": args.sync_delay},
             # every tick publishes, so arrival -> publish is not stretched by decimation
             "zenoh": {"listen": [f"tcp/127.0.0.1:{port}"], "joints_rate_hz": pub_rate,
                       "live_rate_hz": pub_rate},
@@ -116,12 +204,22 @@ def main() -> int:
         stop = threading.Event()
         loop = threading.Thread(target=svc.run, args=(stop,), name="loop")
         time.sleep(1.0)
-        cpu0, t0 = time.process_time(), time.monotonic()
         loop.start()
+        time.sleep(2.0)  # the phase lock acquires; start-up is not measured
+        for st_ in [svc.latency, *svc.latency_by_device.values()]:
+            st_.all.clear()
+        prof_out = args.profile_out or os.path.join(tmp, "py-spy.raw")
+        spy = start_py_spy(args.seconds, prof_out) if args.profile else None
+        cpu0, t0, threads0 = time.process_time(), time.monotonic(), thread_cpu_s()
         time.sleep(args.seconds)
+        cpu, wall = time.process_time() - cpu0, time.monotonic() - t0
+        threads = cpu_by_thread(threads0, thread_cpu_s(), wall)
         stop.set()
         loop.join()
-        cpu, wall = time.process_time() - cpu0, time.monotonic() - t0
+        profile = None
+        if spy is not None:
+            spy.wait(30)
+            profile = summarize_py_spy(prof_out) if os.path.exists(prof_out) else None
         st = svc.loop_stats
         health = svc.health_msg or {}
         svc.close()
@@ -129,7 +227,9 @@ def main() -> int:
     child.stdin.flush()
     sub = json.loads(child.stdout.readline())
     child.wait(10)
-    late = st.all_late[int(args.rate):]  # skip the first second (start-up)
+    late = st.all_late[2 * int(args.rate):]  # skip the first two seconds (start-up)
+    master = args.sync if args.sync in svc.latency_by_device else "mti"
+    others = [x for n, ls in svc.latency_by_device.items() if n != master for x in ls.all]
     res: dict[str, Any] = {
         "rate_hz": args.rate, "publish_rate_hz": pub_rate, "seconds": round(wall, 1),
         "ticks": st.ticks,
@@ -137,13 +237,22 @@ def main() -> int:
         "tick_jitter_ms": pct(late),
         "tick_work_ms": pct(st.all_work),
         "arrival_to_publish_ms": pct(svc.latency.all),
+        "arrival_to_publish_master_ms": {"device": master,
+                                         **pct(svc.latency_by_device[master].all)},
+        "arrival_to_publish_others_ms": pct(others),
+        "arrival_to_publish_by_device_ms": {n: pct(ls.all) for n, ls in
+                                            svc.latency_by_device.items() if ls.all},
+        "sync": (health.get("loop") or {}).get("sync"),
         "tick_to_subscriber_ms": {k: round(v, 3) if isinstance(v, float) else v
                                   for k, v in sub.items()},
         "cpu_percent_of_one_core": round(100.0 * cpu / wall, 1),
+        "cpu_percent_by_thread": threads,
         "passes": svc.passes_written,
         "drivers": {n: {"rate_hz": d.get("rate_hz"), "state": d.get("state")}
                     for n, d in (health.get("drivers") or {}).items()},
     }
+    if profile is not None:
+        res["profile_gil_percent"] = profile
     if args.json:
         print(json.dumps(res))
     else:
@@ -152,12 +261,26 @@ def main() -> int:
               f"{res['overruns']} overruns, {res['passes']} passes")
         print(f"tick jitter      p50 {j['p50']:.3f} ms  p99 {j['p99']:.3f} ms  max "
               f"{j['max']:.3f} ms")
-        print(f"arrival->publish p50 {a['p50']:.3f} ms  p99 {a['p99']:.3f} ms  (n={a['n']})")
+        print(f"arrival->publish p50 {a['p50']:.3f} ms  p99 {a['p99']:.3f} ms  (n={a['n']}, "
+              "all sensors)")
+        m, o = res["arrival_to_publish_master_ms"], res["arrival_to_publish_others_ms"]
+        print(f"  master {m['device']:<8} p50 {m['p50']:.3f} ms  p99 {m['p99']:.3f} ms  "
+              f"(n={m['n']}, sync {args.sync})")
+        print(f"  others          p50 {o['p50']:.3f} ms  p99 {o['p99']:.3f} ms  (n={o['n']}, "
+              "not locked: up to one period)")
+        for n, d in res["arrival_to_publish_by_device_ms"].items():
+            print(f"    {n:<12} p50 {d['p50']:.3f} ms  p99 {d['p99']:.3f} ms")
+        print(f"phase lock       {res['sync']}")
         print(f"tick->subscriber p50 {s['p50']:.3f} ms  p99 {s['p99']:.3f} ms  (other process)")
         print(f"tick work        p50 {res['tick_work_ms']['p50']:.3f} ms  p99 "
               f"{res['tick_work_ms']['p99']:.3f} ms")
-        print(f"CPU              {res['cpu_percent_of_one_core']} % of one core")
+        print(f"CPU              {res['cpu_percent_of_one_core']} % of one core; by thread "
+              f"{res['cpu_percent_by_thread']}")
         print(f"drivers          {res['drivers']}")
+        if profile:
+            print("py-spy, share of GIL-holding samples (inclusive):")
+            for share, name in profile:
+                print(f"  {share:5.1f} %  {name}")
     return 0
 
 

@@ -268,7 +268,7 @@ class MtiEmulator:
                 time.sleep(self.tick_s)
                 continue
             try:
-                ready, _, _ = select.select([fd], [], [], self.tick_s)
+                ready, _, _ = select.select([fd], [], [], self._wait_s())
                 data = os.read(fd, 4096) if ready else b""
             except OSError:
                 data = b""
@@ -276,6 +276,18 @@ class MtiEmulator:
             if data:
                 self._on_bytes(data)
             self._step()
+
+    def _wait_s(self) -> float:
+        """Real seconds until the next packet is due, at most ``tick_s``: a real MTi sends
+        on its own clock's schedule, not on the next poll of a loop."""
+        if self.state != "measurement" or self._silent:
+            return self.tick_s
+        speed = getattr(self.clock, "speed", 1.0)
+        if not speed or getattr(self.clock, "stepped", False):
+            return self.tick_s
+        due_t = self._t0 + self._next_k / self.packet_rate_hz
+        left = (due_t - self.clock()) / speed + 2e-5  # wake just after it is due
+        return min(self.tick_s, max(0.0, left))
 
     def _plug(self) -> None:
         self._unplug()

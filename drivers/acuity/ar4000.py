@@ -51,6 +51,7 @@ from typing import Any
 
 from drivers.base import DeviceError, Driver, Reading, Sink
 from drivers.capture.tap import ByteTap, SerialFactory, open_serial
+from drivers.serialio import direct_reader
 
 log = logging.getLogger(__name__)
 
@@ -265,6 +266,7 @@ class Ar4000Driver(Driver):
         """Set by the recorder: every byte read/written is copied to it."""
         self._factory = serial_factory
         self._ser: Any = None
+        self._direct: Callable[[float], bytes] | None = None
         self._splitter = LineSplitter(config.max_line_bytes)
         self._recent: deque[bool] = deque(maxlen=config.babble_window)
         self._pending: list[Reading] = []
@@ -297,6 +299,7 @@ class Ar4000Driver(Driver):
                     time.sleep(cfg.command_gap_s)
             # lines already queued may be in the old unit: start clean
             self._ser.reset_input_buffer()
+        self._direct = direct_reader(self._ser)
         # The device answers when a well-formed line arrives; real time, because a
         # stepped replay clock may not move while we wait.
         deadline = time.monotonic() + cfg.answer_timeout_s
@@ -312,6 +315,7 @@ class Ar4000Driver(Driver):
                           "wrong baud rate or device off?")
 
     def close(self) -> None:
+        self._direct = None
         ser, self._ser = self._ser, None
         if ser is not None:
             try:
@@ -371,7 +375,14 @@ class Ar4000Driver(Driver):
             for r in pending:
                 self.emit(sink, r)
         try:
-            data = ser.read(max(1, ser.in_waiting))
+            if self._direct is not None:  # a plain port: one select, one read
+                data = self._direct(self.config.read_timeout_s)
+            else:
+                data = ser.read(max(1, ser.in_waiting))
+                if len(data) == 1:  # woke on a line's first byte: the rest came with it
+                    n = ser.in_waiting
+                    if n:
+                        data += ser.read(n)
         except Exception as e:  # noqa: BLE001 - unplugged USB adapter etc.
             raise DeviceError(f"AR4000 read failed on {self.config.port}: {e}") from e
         t_rx = self.clock()

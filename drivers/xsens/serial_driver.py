@@ -39,6 +39,7 @@ from typing import Any
 import serial
 
 from drivers.base import DeviceError, Driver, Reading, Sink
+from drivers.serialio import direct_reader
 from drivers.xsens.mtdata2 import (
     FRAME_BY_NAME,
     MAX_FREQUENCY,
@@ -120,6 +121,7 @@ class MtiSerialDriver(Driver):
         self.firmware: str | None = None
         self.output_configuration: list[tuple[int, int]] = []
         self._ser: serial.Serial | None = None
+        self._direct: Callable[[float], bytes] | None = None
         self._parser = XbusParser()
         self._counted = (0, 0)
         self._prev_counter: int | None = None
@@ -170,7 +172,15 @@ class MtiSerialDriver(Driver):
         if self._ser is None:
             raise DeviceError(f"MTi port {self.port} is not open")
         try:
-            data = self._ser.read(max(1, self._ser.in_waiting))
+            if self._direct is not None:  # a plain port: one select, one read
+                data = self._direct(self.read_timeout_s)
+            else:
+                ser = self._ser
+                data = ser.read(max(1, ser.in_waiting))
+                if len(data) == 1:  # woke on a message's first byte: the rest came with it
+                    n = ser.in_waiting
+                    if n:
+                        data += ser.read(n)
         except (OSError, serial.SerialException) as e:
             raise DeviceError(f"MTi on {self.port} disconnected: {e}") from e
         msgs = self._parser.feed(data) if data else []
@@ -232,6 +242,7 @@ class MtiSerialDriver(Driver):
         except (OSError, serial.SerialException, ValueError) as e:
             self._ser = None
             raise DeviceError(f"cannot open MTi port {self.port}: {e}") from e
+        self._direct = direct_reader(self._ser)
         self._parser.reset()
         self._command(MID.GOTO_CONFIG, b"", MID.GOTO_CONFIG_ACK, retries=4)
         did = self._command(MID.REQ_DID, b"", MID.DEVICE_ID)
@@ -329,6 +340,7 @@ class MtiSerialDriver(Driver):
             log.warning("%s: packet counter jumped back from %d to %d", self.name, prev, counter)
 
     def close(self) -> None:
+        self._direct = None
         ser, self._ser = self._ser, None
         if ser is not None:
             try:

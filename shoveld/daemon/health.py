@@ -22,22 +22,26 @@ class LatencyStats:
     """Ring of arrival-to-publish latencies (seconds)."""
 
     def __init__(self, window: int = 4000, keep_all: bool = False) -> None:
-        self._v = np.zeros(window)
+        self._window = window
+        self._v = [0.0] * window
+        self._i = 0
         self._n = 0
         self.keep_all = keep_all
         self.all: list[float] = []
 
     def add(self, x: float) -> None:
-        self._v[self._n % len(self._v)] = x
+        i = self._i
+        self._v[i] = x
+        self._i = 0 if i + 1 == self._window else i + 1
         self._n += 1
         if self.keep_all:
             self.all.append(x)
 
     def as_dict(self) -> dict[str, Any] | None:
-        n = min(self._n, len(self._v))
+        n = min(self._n, self._window)
         if not n:
             return None
-        v = self._v[:n]
+        v = np.array(self._v[:n])
         p50, p99 = np.percentile(v, [50, 99])
         return {"p50": round(1e3 * p50, 3), "p99": round(1e3 * p99, 3),
                 "max": round(1e3 * float(v.max()), 3), "n": self._n}

@@ -127,6 +127,8 @@ class PhaseLock:
         """Total movement of the grid since start (seconds, + = later)."""
         self.last_error_s = math.nan
         self.lost_count = 0
+        self.late = 0
+        """Master readings that arrived after the tick locked to them (they wait a period)."""
         self._mean_abs = period_s / 4.0
         self._last_ref: float | None = None
         self._last_new = -math.inf
@@ -149,6 +151,8 @@ class PhaseLock:
             return 0.0
         period = self.period
         half = 0.5 * period
+        if (deadline - a + half) % period - half < 0.0:
+            self.late += 1  # arrived after the tick it was meant for: waits a period
         e = (deadline - a - self.delay + half) % period - half
         self.last_error_s = e
         i = self._i
@@ -172,11 +176,13 @@ class PhaseLock:
         d: dict[str, Any] = {"state": self.state, "delay_ms": round(1e3 * self.delay, 3),
                              "corrections": self.corrections,
                              "shift_ms": round(1e3 * self.shift_s, 3),
-                             "lost": self.lost_count}
+                             "lost": self.lost_count,
+                             "late_pct": round(100.0 * self.late / max(1, self.corrections), 2)}
         if n:
             err = np.abs(np.array(self._err[:n]))
             p50, p99 = np.percentile(err, [50, 99])
-            d["phase_error_ms"] = {"p50": round(1e3 * p50, 3), "p99": round(1e3 * p99, 3)}
+            d["phase_error_ms"] = {"p50": round(1e3 * float(p50), 3),
+                                   "p99": round(1e3 * float(p99), 3)}
         return d
 
 

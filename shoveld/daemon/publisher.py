@@ -55,8 +55,15 @@ def _clean(o: Any) -> Any:
     return o
 
 
+_encode = json.JSONEncoder(separators=(",", ":"), allow_nan=False).encode
+
+
 def dumps(obj: Any) -> str:
-    return json.dumps(_clean(obj), separators=(",", ":"), allow_nan=False)
+    """Compact JSON; NaN and infinities become null."""
+    try:
+        return _encode(obj)  # the usual case: nothing to clean, one pass in C
+    except ValueError:  # a NaN or infinity somewhere: clean, then encode
+        return _encode(_clean(obj))
 
 
 class Publisher:
