@@ -50,6 +50,7 @@ from dataclasses import dataclass, fields
 from typing import Any
 
 from drivers.base import DeviceError, Driver, Reading, Sink
+from drivers.capture.clock import clock_wait_until
 from drivers.capture.tap import ByteTap, SerialFactory, open_serial
 from drivers.serialio import direct_reader
 
@@ -269,6 +270,8 @@ class Ar4000Driver(Driver):
         self._direct: Callable[[float], bytes] | None = None
         self._splitter = LineSplitter(config.max_line_bytes)
         self._recent: deque[bool] = deque(maxlen=config.babble_window)
+        self._recent_bad = 0
+        """Malformed lines in ``_recent`` (kept as it changes, not summed per chunk)."""
         self._pending: list[Reading] = []
         self._last_good = 0.0
         self._garbage_since_good = 0
@@ -295,8 +298,9 @@ class Ar4000Driver(Driver):
         if cfg.configure:
             for cmd in cfg.commands():
                 self._ser.write(cmd)
-                if cfg.command_gap_s:
-                    time.sleep(cfg.command_gap_s)
+                if cfg.command_gap_s:  # on the driver's clock: a fast replay has no device
+                    gap_end = self.clock() + cfg.command_gap_s  # to give time to
+                    clock_wait_until(self.clock, gap_end, max_real_s=cfg.command_gap_s)
             # lines already queued may be in the old unit: start clean
             self._ser.reset_input_buffer()
         self._direct = direct_reader(self._ser)
@@ -340,10 +344,10 @@ class Ar4000Driver(Driver):
                     self.health.bad_frames += 1
                     self.health.rejected_bytes += len(line) + 1
                     self._garbage_since_good += len(line) + 1
-                    self._recent.append(False)
+                    self._remember(False)
                 continue
             good += 1
-            self._recent.append(True)
+            self._remember(True)
             self._garbage_since_good = 0
             if value == NO_TARGET:
                 self.health.extra["no_target"] += 1
@@ -356,9 +360,17 @@ class Ar4000Driver(Driver):
         self._update_babbling()
         return good
 
+    def _remember(self, ok: bool) -> None:
+        recent = self._recent
+        if len(recent) == recent.maxlen and not recent[0]:
+            self._recent_bad -= 1  # the oldest (malformed) line drops out
+        recent.append(ok)
+        if not ok:
+            self._recent_bad += 1
+
     def _update_babbling(self) -> None:
         n = len(self._recent)
-        bad = n - sum(self._recent)
+        bad = self._recent_bad
         babbling = n >= min(10, self.config.babble_window) and bad / n > self.config.babble_ratio
         if babbling and not self.health.extra["babbling"]:
             log.warning("%s: AR4000 babbling: %d of the last %d lines malformed",

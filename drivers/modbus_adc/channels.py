@@ -18,7 +18,7 @@ emulator puts in its registers, so driver and emulator share one set of numbers.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -66,6 +66,19 @@ class Channel:
         v = self.volts_min + (raw - self.raw_min) * (self.volts_max - self.volts_min) / (
             self.raw_max - self.raw_min)
         return v * self.scale + self.offset
+
+    def word_decoder(self) -> Callable[[int], float]:
+        """:meth:`from_word` as one closure over this channel's constants (the driver's
+        per-poll path); the same arithmetic, so the same values to the last bit."""
+        signed = self.signed
+        vmin, rmin = self.volts_min, self.raw_min
+        vspan, rspan = self.volts_max - self.volts_min, self.raw_max - self.raw_min
+        scale, offset = self.scale, self.offset
+
+        def decode(word: int) -> float:
+            raw = word - 0x10000 if signed and word >= 0x8000 else word
+            return (vmin + (raw - rmin) * vspan / rspan) * scale + offset
+        return decode
 
     def from_word(self, word: int) -> float:
         return self.from_raw(self.word_to_raw(word))

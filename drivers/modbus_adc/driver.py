@@ -194,6 +194,9 @@ class ModbusAdcConfig:
         return d
 
 
+_NONE: frozenset[str] = frozenset()
+
+
 def _new_channel_health() -> dict[str, Any]:
     return {"state": "never", "timeouts": 0, "exceptions": 0, "last_ok_t": None,
             "stale": True, "last_error": None}
@@ -217,8 +220,15 @@ class ModbusAdcDriver(Driver):
         self._client: Any = None
         self._next_poll: float | None = None
         self._failed_polls = 0
-        self.health.extra["channels"] = {c.name: _new_channel_health() for c in config.channels}
+        self.health.extra["channels"] = chh = {c.name: _new_channel_health()
+                                               for c in config.channels}
         self.health.extra["exceptions"] = 0
+        self._plan = [(address, count, chans,
+                       tuple((ch.name, ch.register - address, ch.word_decoder(), chh[ch.name])
+                             for ch in chans))
+                      for address, count, chans in self._blocks]
+        """Per block: the channels' offsets, decoders and health dicts (built once)."""
+        self._channel_health = tuple(chh[c.name] for c in config.channels)
 
     @classmethod
     def from_config(cls, name: str, d: Mapping[str, Any], **kw: Any) -> ModbusAdcDriver:
@@ -286,12 +296,13 @@ class ModbusAdcDriver(Driver):
         c = self.config
         values: dict[str, float] = {}
         invalid: set[str] = set()
-        chh: dict[str, dict[str, Any]] = self.health.extra["channels"]
         answered = False
-        t = self.clock()
-        for address, count, chans in self._blocks:
+        clock = self.clock
+        isfinite = math.isfinite
+        t = clock()
+        for address, count, chans, decoders in self._plan:
             words, err, code = self._read_block(address, count)
-            t = self.clock()
+            t = clock()
             if self.register_log is not None:
                 self.register_log(RegisterRead(
                     t, c.unit, c.function_code, address, count,
@@ -300,13 +311,13 @@ class ModbusAdcDriver(Driver):
             if err != "timeout":
                 answered = True
             if words is not None:
-                for ch in chans:
-                    v = ch.from_word(words[ch.register - address])
-                    if math.isfinite(v):
-                        values[ch.name] = v
-                        h = chh[ch.name]
-                        h["state"], h["last_ok_t"], h["stale"] = "ok", t, False
-                        h["last_error"] = None
+                for name, offset, decode, h in decoders:
+                    v = decode(words[offset])
+                    if isfinite(v):
+                        values[name] = v
+                        h["last_ok_t"] = t
+                        if h["state"] != "ok":
+                            h["state"], h["last_error"] = "ok", None
                 continue
             if err == "timeout":
                 self.health.timeouts += 1
@@ -314,7 +325,7 @@ class ModbusAdcDriver(Driver):
                 self.health.extra["exceptions"] += 1
             for ch in chans:
                 invalid.add(ch.name)
-                h = chh[ch.name]
+                h = self.health.extra["channels"][ch.name]
                 h["state"] = err
                 if err == "timeout":
                     h["timeouts"] += 1
@@ -323,10 +334,11 @@ class ModbusAdcDriver(Driver):
                     h["exceptions"] += 1
                     h["last_error"] = f"Modbus exception code {code}"
         now = t  # receive time of the last block, taken right after its answer
-        for ch in c.channels:
-            h = chh[ch.name]
-            h["stale"] = h["last_ok_t"] is None or now - h["last_ok_t"] > c.stale_after_s
-        reading = Reading(self.name, now, values, frozenset(invalid))
+        stale_after = c.stale_after_s
+        for h in self._channel_health:
+            last = h["last_ok_t"]
+            h["stale"] = last is None or now - last > stale_after
+        reading = Reading(self.name, now, values, frozenset(invalid) if invalid else _NONE)
         self.emit(sink, reading)
         self._failed_polls = 0 if answered else self._failed_polls + 1
         return reading

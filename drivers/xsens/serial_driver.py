@@ -62,6 +62,9 @@ BAUD_RATES = (4800, 9600, 14400, 19200, 28800, 38400, 57600, 115200, 230400, 460
 VALUE_KEYS = ("roll_deg", "pitch_deg", "yaw_deg", "gyr_x", "gyr_y", "gyr_z", "acc_x", "acc_y",
               "acc_z", "packet_counter", "sample_time_fine", "status_word")
 _NO_INVALID: frozenset[str] = frozenset()
+_EULER, _RATE_OF_TURN, _ACCELERATION = XDI.EULER_ANGLES, XDI.RATE_OF_TURN, XDI.ACCELERATION
+_PACKET_COUNTER, _SAMPLE_TIME_FINE, _STATUS_WORD = (XDI.PACKET_COUNTER, XDI.SAMPLE_TIME_FINE,
+                                                    XDI.STATUS_WORD)
 SAMPLE_TIME_FINE_S = 1e-4
 """SampleTimeFine counts a 10 kHz clock (MTi documentation; CAN 'SampleTime' note)."""
 
@@ -183,8 +186,10 @@ class MtiSerialDriver(Driver):
                         data += ser.read(n)
         except (OSError, serial.SerialException) as e:
             raise DeviceError(f"MTi on {self.port} disconnected: {e}") from e
-        msgs = self._parser.feed(data) if data else []
-        self._account()
+        if not data:
+            return []
+        msgs = self._parser.feed(data)
+        self._account()  # counters move only when bytes were fed
         return msgs
 
     def _command(self, mid: int, data: bytes, expect: int, retries: int = 1) -> XbusMessage:
@@ -299,6 +304,18 @@ class MtiSerialDriver(Driver):
         """One MTData2 payload -> Reading (quantities the packet lacks are marked invalid)."""
         t_host = self.clock()
         items = mtdata2_values(payload)
+        get = items.get
+        e, g, acc = get(_EULER), get(_RATE_OF_TURN), get(_ACCELERATION)
+        pc, stf, sw = get(_PACKET_COUNTER), get(_SAMPLE_TIME_FINE), get(_STATUS_WORD)
+        if (e is not None and g is not None and acc is not None and pc is not None
+                and stf is not None and sw is not None):  # the configured packet: all there
+            self._count_gap(pc)
+            return Reading(self.name, t_host, {
+                "roll_deg": e[0], "pitch_deg": e[1], "yaw_deg": e[2],
+                "gyr_x": g[0], "gyr_y": g[1], "gyr_z": g[2],
+                "acc_x": acc[0], "acc_y": acc[1], "acc_z": acc[2],
+                "packet_counter": float(pc), "sample_time_fine": float(stf),
+                "status_word": float(sw)}, _NO_INVALID, stf * SAMPLE_TIME_FINE_S)
         values: dict[str, float] = {}
         v = items.get(XDI.EULER_ANGLES)
         if v is None and XDI.QUATERNION in items:

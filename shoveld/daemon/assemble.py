@@ -103,9 +103,39 @@ class Assembler:
         row[0] = t
         invalid: list[str] = []
         arrivals: list[tuple[str, float]] = []
-        device = self._device
+        health_of, cache = self.health_of, self._cache
         for plan in self._plan:
-            device(t, plan, row, invalid, arrivals)
+            name, _dev, kind, st, _ranges, max_age, signals, recent = plan
+            b: Stored | None = recent[-1] if recent else None
+            if b is None or b.reading.t_host > t:  # nothing yet, or a reading after the tick
+                self._device(t, plan, row, invalid, arrivals)
+                continue
+            # the usual case, inline: the newest reading is at or before the tick
+            health = health_of(name)
+            st.age_s = age = t - b.reading.t_host
+            if b.seq > st.last_seq:
+                arrivals.append((name, b.arrived))
+                st.last_seq = b.seq
+            if health is not None and not health.connected:
+                st.state = "disconnected"
+                invalid.extend(signals)
+                continue
+            if age > max_age:
+                st.state = "stale"
+                invalid.extend(signals)
+                continue
+            if kind == _MTI:
+                self._mti(t, b, None, row, invalid, st)
+                continue
+            cached = cache.get(name)
+            if cached is not None and cached[0] is b:  # nothing new from this device
+                _, pairs, bad, st.invalid, st.state = cached
+                for i, v in pairs:
+                    row[i] = v
+                if bad:
+                    invalid.extend(bad)
+                continue
+            self._contribute(t, plan, b, None, row, invalid)
         self.new_arrivals = arrivals
         return Sample(*row, invalid=frozenset(invalid) if invalid else _EMPTY)
 
@@ -153,6 +183,14 @@ class Assembler:
                 if bad:
                     invalid.extend(bad)
                 return
+        self._contribute(t, plan, b, a, row, invalid)
+
+    def _contribute(self, t: float, plan: tuple[Any, ...], b: Stored, a: Stored | None,
+                    row: list[float], invalid: list[str]) -> None:
+        """A laser's or ADC module's signals from its bracketing readings (cached when
+        there is no later reading to interpolate with)."""
+        name, _dev, kind, st, ranges = plan[:5]
+        r = b.reading
         pairs: list[tuple[int, float]] = []
         bad: list[str] = []
         if kind == _LASER:

@@ -11,10 +11,9 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-import numpy as np
-
 from drivers.base import Driver
 from shoveld.daemon.assemble import DeviceState
+from shoveld.daemon.loop import percentiles
 from shoveld.daemon.store import ReadingStore
 
 
@@ -41,10 +40,9 @@ class LatencyStats:
         n = min(self._n, self._window)
         if not n:
             return None
-        v = np.array(self._v[:n])
-        p50, p99 = np.percentile(v, [50, 99])
+        (p50, p99), vmax = percentiles(self._v[:n])
         return {"p50": round(1e3 * p50, 3), "p99": round(1e3 * p99, 3),
-                "max": round(1e3 * float(v.max()), 3), "n": self._n}
+                "max": round(1e3 * vmax, 3), "n": self._n}
 
 
 class RateMeter:

@@ -24,9 +24,22 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-import numpy as np
-
 from shoveld.daemon.clock import Clock
+
+
+def percentiles(values: list[float], ps: tuple[float, ...] = (50.0, 99.0)
+                ) -> tuple[list[float], float]:
+    """(percentiles ``ps`` with linear interpolation, as numpy's default; maximum) of a
+    non-empty list - sorting a list of floats is cheaper than making an array of it."""
+    s = sorted(values)
+    n = len(s)
+    out = []
+    for p in ps:
+        pos = p / 100.0 * (n - 1)
+        i = int(pos)
+        frac = pos - i
+        out.append(s[i] + (s[i + 1] - s[i]) * frac if frac and i + 1 < n else s[i])
+    return out, s[-1]
 
 
 class LoopStats:
@@ -63,9 +76,9 @@ class LoopStats:
             self.all_work.append(work_s)
         self.last_tick_mono = time.monotonic()
 
-    def recent(self) -> tuple[np.ndarray, np.ndarray]:
+    def recent(self) -> tuple[list[float], list[float]]:
         n = min(self._n, self._window)
-        return np.array(self._late[:n]), np.array(self._work[:n])
+        return self._late[:n], self._work[:n]
 
     def as_dict(self, rate_hz: float, simulated: bool = False) -> dict[str, Any]:
         late, work = self.recent()
@@ -75,15 +88,15 @@ class LoopStats:
             "ticks": self.ticks, "overruns": self.overruns, "skipped_ticks": self.skipped,
             "actual_rate_hz": round(self.ticks / elapsed, 2) if elapsed > 0 else None,
         }
-        if len(late) and not simulated:
-            p50, p99 = np.percentile(late, [50, 99])
+        if late and not simulated:
+            (p50, p99), vmax = percentiles(late)
             d["jitter_ms"] = {"p50": round(1e3 * p50, 3), "p99": round(1e3 * p99, 3),
-                              "max": round(1e3 * float(late.max()), 3),
+                              "max": round(1e3 * vmax, 3),
                               "max_since_start": round(1e3 * self.max_late_s, 3)}
-        if len(work):
-            w50, w99 = np.percentile(work, [50, 99])
+        if work:
+            (w50, w99), wmax = percentiles(work)
             d["tick_work_ms"] = {"p50": round(1e3 * w50, 3), "p99": round(1e3 * w99, 3),
-                                 "max": round(1e3 * float(work.max()), 3)}
+                                 "max": round(1e3 * wmax, 3)}
         return d
 
 
@@ -179,10 +192,8 @@ class PhaseLock:
                              "lost": self.lost_count,
                              "late_pct": round(100.0 * self.late / max(1, self.corrections), 2)}
         if n:
-            err = np.abs(np.array(self._err[:n]))
-            p50, p99 = np.percentile(err, [50, 99])
-            d["phase_error_ms"] = {"p50": round(1e3 * float(p50), 3),
-                                   "p99": round(1e3 * float(p99), 3)}
+            (p50, p99), _ = percentiles([abs(e) for e in self._err[:n]])
+            d["phase_error_ms"] = {"p50": round(1e3 * p50, 3), "p99": round(1e3 * p99, 3)}
         return d
 
 

@@ -66,6 +66,14 @@ class Notifier:
     def stopping(self) -> bool:
         return self._send("STOPPING=1")
 
+    def watchdog_due(self, now: float | None = None) -> bool:
+        """Whether :meth:`watchdog` would ping now (so the caller checks its health only
+        then, not at every tick)."""
+        if self.watchdog_s is None or self.address is None:
+            return False
+        now = time.monotonic() if now is None else now
+        return now - self._last_ping >= self.watchdog_s / 2
+
     def watchdog(self, now: float | None = None) -> bool:
         """Ping if half the watchdog interval has passed since the last ping."""
         if self.watchdog_s is None or self.address is None:

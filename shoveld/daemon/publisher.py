@@ -7,7 +7,9 @@ that retries with back-off, because in client mode Zenoh's ``open`` fails (or
 waits) while no router is reachable, and the shovel must weigh whether or not the
 site network is up. Until it is open, messages are counted as dropped. Loop-side
 topics use congestion control DROP, so a slow or vanished subscriber can never
-stall the loop; passes and trucks, published from the pass-log thread, use BLOCK.
+stall the loop, and are not even encoded while no subscriber matches them (Zenoh's
+matching status); passes and trucks, published from the pass-log thread, use BLOCK and
+always go out.
 """
 
 from __future__ import annotations
@@ -84,6 +86,9 @@ class Publisher:
         self._lock = threading.Lock()
         self.sent = 0
         self.dropped = 0
+        self.unmatched = 0
+        """Loop-topic messages not encoded because no subscriber matched their key."""
+        self._matching: dict[str, bool] = {}
         self.errors = 0
         self.queries = 0
         self.last_error: str | None = None
@@ -150,8 +155,21 @@ class Publisher:
                 priority=zenoh.Priority.DATA_HIGH if reliable else zenoh.Priority.DATA)
         token = session.liveliness().declare_token(self.key("alive"))
         queryable = session.declare_queryable(self.key("status"), self._on_query)
+        listeners = []
+        for topic, pub in pubs.items():
+            if topic in RELIABLE_TOPICS:
+                continue  # passes and trucks always go out
+            # loop topics: encode and put only while someone subscribes (the listener
+            # follows subscribers coming and going; a status query serves late joiners)
+            try:
+                self._matching[topic] = bool(pub.matching_status.matching)
+                listeners.append(pub.declare_matching_listener(
+                    lambda st, _t=topic: self._matching.__setitem__(_t, bool(st.matching))))
+            except Exception as e:  # noqa: BLE001 - no matching support: always publish
+                log.debug("zenoh: no matching listener for %s (%s)", topic, e)
+                self._matching.pop(topic, None)
         self._pubs = pubs
-        self._decls = [token, queryable, *pubs.values()]
+        self._decls = [*listeners, token, queryable, *pubs.values()]
 
     def _on_query(self, query: Any) -> None:
         import zenoh
@@ -170,6 +188,7 @@ class Publisher:
             session, self._session = self._session, None
             decls, self._decls = self._decls, []
             self._pubs = {}
+            self._matching = {}
         for d in decls:
             try:
                 d.undeclare()
@@ -189,9 +208,14 @@ class Publisher:
         return self._session is not None
 
     def put(self, topic: str, obj: dict[str, Any]) -> bool:
+        """Encode and publish; False if it did not go out (no session, nobody
+        subscribes to a loop topic, an error)."""
         pub = self._pubs.get(topic)
         if pub is None:
             self.dropped += 1
+            return False
+        if not self._matching.get(topic, True):
+            self.unmatched += 1
             return False
         try:
             pub.put(dumps(obj))
@@ -218,7 +242,8 @@ class Publisher:
 
     def health(self) -> dict[str, Any]:
         d: dict[str, Any] = {"mode": self.cfg.mode, "open": self.connected, "sent": self.sent,
-                             "dropped": self.dropped, "errors": self.errors,
+                             "dropped": self.dropped, "not_subscribed": self.unmatched,
+                             "errors": self.errors,
                              "queries": self.queries, "last_error": self.last_error}
         s = self._session
         if s is not None:

@@ -99,6 +99,8 @@ class Service:
         self._live_every = max(1, round(cfg.loop.rate_hz / cfg.zenoh.live_rate_hz))
         self._next_health = -math.inf
         self._pending_arrivals: list[tuple[str, float]] = []
+        self._measure_latency = not self.clock.simulated
+        """Arrival -> publish needs host time; a simulated clock has none."""
         self._prev_overruns = 0
         self._prev_ticks = 0
         # snapshots for the status query (replaced whole, read from Zenoh's thread)
@@ -245,7 +247,7 @@ class Service:
             self.before_tick(t)
         s = self.assembler.sample(t)
         pending = self._pending_arrivals
-        if self.assembler.new_arrivals:
+        if self.assembler.new_arrivals and self._measure_latency:
             pending.extend(self.assembler.new_arrivals)
             if len(pending) > MAX_PENDING_ARRIVALS:  # nothing published for a while
                 del pending[:-MAX_PENDING_ARRIVALS]
@@ -278,7 +280,7 @@ class Service:
                 log.warning("drivers not all connected after %.0f s; running degraded",
                             self.cfg.loop.ready_timeout_s)
             self.notifier.ready("running" if up else "running degraded: drivers not all up")
-        if self._healthy():
+        if self.notifier.watchdog_due() and self._healthy():
             self.notifier.watchdog()
 
     def _published(self, joints_only: bool) -> None:

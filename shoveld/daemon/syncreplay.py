@@ -17,6 +17,7 @@ capture gives the same readings, samples and passes on every run.
 
 from __future__ import annotations
 
+import bisect
 import logging
 import math
 from collections import deque
@@ -55,6 +56,8 @@ class MemorySerial:
     def __init__(self, stream: list[tuple[float, bytes]], responder: Callable[[bytes], Any],
                  port: str) -> None:
         self.stream = stream
+        self._times = [c[0] for c in stream]
+        self._chunks = [c[1] for c in stream]
         self.responder = responder
         self.port = port
         self.timeout = 0.0
@@ -66,10 +69,12 @@ class MemorySerial:
         (devices that answer by streaming need data before time may move)."""
 
     def release(self, t: float) -> None:
-        s = self.stream
-        while self._i < len(s) and s[self._i][0] <= t:
-            self._buf += s[self._i][1]
-            self._i += 1
+        i = self._i
+        times = self._times
+        if i < len(times) and times[i] <= t:
+            j = bisect.bisect_right(times, t, i)
+            self._buf += self._chunks[i] if j == i + 1 else b"".join(self._chunks[i:j])
+            self._i = j
 
     @property
     def exhausted(self) -> bool:
@@ -170,6 +175,12 @@ class _Response:
         return self.exception_code is not None
 
 
+def _modbus_io_exception() -> type[Exception]:
+    from pymodbus.exceptions import ModbusIOException
+
+    return ModbusIOException
+
+
 class MemoryModbus:
     """A pymodbus-like client answering from recorded register reads at capture time."""
 
@@ -192,14 +203,12 @@ class MemoryModbus:
         pass
 
     def _read(self, fc: int, address: int, count: int) -> _Response:
-        from pymodbus.exceptions import ModbusIOException
-
         r = self.registers(fc, address, count)
         if r is None:
-            raise ModbusIOException("no answer (recorded timeout)")
+            raise _modbus_io_exception()("no answer (recorded timeout)")
         if isinstance(r, int):
             return _Response(code=r)
-        return _Response(list(r))
+        return _Response(r)  # a fresh list from the recording
 
     def read_input_registers(self, address: int, count: int = 1, **kw: Any) -> _Response:
         return self._read(4, address, count)
