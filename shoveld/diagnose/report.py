@@ -1,0 +1,294 @@
+"""The diagnosis as JSON and as a short human report (Markdown with PNG plots)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from shoveld.diagnose.core import Diagnosis
+from shoveld.diagnose.data import RATED_PAYLOAD_KG
+from shoveld.diagnose.explain import VARIABLES, binned
+from shoveld.model.params import ModelParams, save_params
+from shoveld.model.terms import TERMS
+
+
+def _params_json(p: ModelParams) -> dict[str, Any]:
+    units = p.model().param_units
+    return {n: {"value": float(v), "stderr": float(se), "unit": u}
+            for n, v, se, u in zip(p.names, p.values, p.stderr, units, strict=True)}
+
+
+def _derived(p: ModelParams) -> dict[str, float]:
+    out: dict[str, float] = {}
+    values = p.as_dict()
+    for t in p.model().terms:
+        der = getattr(t, "derived", None)
+        if der is not None:
+            out.update({k: round(float(v), 5) for k, v in der(values).items()})
+    return out
+
+
+def cause(name: str) -> str:
+    cls = TERMS[name]
+    return str(getattr(cls, "cause", "") or cls.description)
+
+
+def as_json(d: Diagnosis) -> dict[str, Any]:
+    sel = d.selection
+    ds = d.dataset
+    first = sel.steps[0].candidates if sel.steps else []
+    out: dict[str, Any] = {
+        "found": d.found,
+        "causes": {n: cause(n) for n in d.found},
+        "ranked": [c.as_dict() for c in first],
+        "steps": [{"model": s.model, "chosen": s.chosen,
+                   "candidates": [c.as_dict() for c in s.candidates]} for s in sel.steps],
+    }
+    for tag, ev, res in (("base", sel.base, d.base_residuals),
+                         ("extended", sel.extended, d.extended_residuals)):
+        entry: dict[str, Any] = {
+            "effects": ev.effects, "residual_rms": res.rms(),
+            "payload": d.payload(tag), "cross_validated": ev.cross_validated}
+        if d.engine:
+            entry["payload_engine"] = d.payload(tag, "engine")
+        if tag == "base":
+            entry["params"] = _params_json(ev.folds[0])
+        else:
+            entry["params"] = _params_json(d.extended_params)
+            entry["hyper"] = d.extended_params.hyper
+            entry["derived"] = _derived(d.extended_params)
+        out[tag] = entry
+    b, e = out["base"]["payload"], out["extended"]["payload"]
+    if b.get("passes") and e.get("passes"):
+        out["gain"] = {"payload_rms_kg": round(b["rms_kg"] - e["rms_kg"], 1),
+                       "payload_rms_pct_rated": round(b["rms_pct_rated"] - e["rms_pct_rated"], 3),
+                       "rated_kg": RATED_PAYLOAD_KG}
+    out["passes"] = []
+    for p in ds.passes:
+        row: dict[str, Any] = {"pass": p.index, "table": ds.measured[p.table].source,
+                               "start_s": round(p.start_s, 2),
+                               "verified_kg": None if not p.verified else round(p.payload_kg, 1)}
+        for tag, ev in (("base", sel.base), ("extended", sel.extended)):
+            v = ev.scores[p.index].payload_kg
+            row[f"{tag}_kg"] = None if not math.isfinite(v) else round(v, 1)
+            if d.engine and p.verified:
+                v = d.engine.get(tag, {}).get(p.index, math.nan)
+                row[f"{tag}_engine_kg"] = None if not math.isfinite(v) else round(v, 1)
+        out["passes"].append(row)
+    out["residuals_against"] = _round(d.against)
+    n = sum(len(t) for t in ds.measured)
+    rate = ds.measured[0].sample_rate_hz if ds.measured else math.nan
+    out["data"] = {"calib_files": [t.source for t in ds.calib],
+                   "measured_files": [t.source for t in ds.measured],
+                   "measured_samples": n, "measured_hours": round(n / rate / 3600, 4),
+                   "passes": len(ds.passes), "verified_passes": len(d.verified)}
+    cfg = d.config
+    out["method"] = {"alpha": cfg.alpha, "min_gain": cfg.min_gain,
+                     "max_effects": cfg.max_effects,
+                     "test": "per-pass held-out loss differences, one-sided t, Bonferroni "
+                             "over the candidates of a step"}
+    out["timing_s"] = {k: round(v, 3) for k, v in d.timing.items()}
+    return out
+
+
+def _round(x: Any) -> Any:
+    if isinstance(x, float):
+        return None if not math.isfinite(x) else round(x, 5)
+    if isinstance(x, dict):
+        return {k: _round(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_round(v) for v in x]
+    return x
+
+
+# ------------------------------------------------------------------------ the report
+def _signature(name: str | None) -> str:
+    if name is None:
+        return "payload"
+    return str(getattr(TERMS[name], "signature", "") or "payload")
+
+
+def _plot_cause(d: Diagnosis, key: str, path: Path, title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    label, unit = VARIABLES[key]
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharex=True)
+    for ax, chan, name in ((axes[0], "hoist_a", "hoist"), (axes[1], "crowd_a", "crowd")):
+        for tag, res, col in (("base model", d.base_residuals, "C3"),
+                              ("extended model", d.extended_residuals, "C0")):
+            if tag == "extended model" and not d.found:
+                continue
+            x, y = res.variables[key], getattr(res, chan)
+            ok = np.isfinite(x) & np.isfinite(y)
+            if ok.sum() > 2000:
+                pick = np.random.default_rng(0).choice(np.flatnonzero(ok), 2000, replace=False)
+            else:
+                pick = np.flatnonzero(ok)
+            ax.plot(x[pick], y[pick], ".", ms=2, alpha=0.15, color=col)
+            b = binned(x, y, 10)
+            ax.errorbar(b["centres"], b["mean"], yerr=b["se"], fmt="o-", color=col, label=tag)
+        ax.axhline(0, color="k", lw=0.5)
+        ax.set_xlabel(f"{label} ({unit})")
+        ax.set_ylabel(f"{name} current: measured - model (A)")
+        lim = np.nanpercentile(np.abs(getattr(d.base_residuals, chan)), 98)
+        if math.isfinite(lim) and lim > 0:
+            ax.set_ylim(-1.2 * lim, 1.2 * lim)
+        ax.legend(fontsize=8)
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _plot_payload(d: Diagnosis, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ver = d.verified
+    fig, ax = plt.subplots(figsize=(9, 4))
+    idx = [p.index for p in ver]
+    for tag, ev, col, mk in (("base", d.selection.base, "C3", "s"),
+                             ("extended", d.selection.extended, "C0", "o")):
+        if tag == "extended" and not d.found:
+            continue
+        err = [ev.scores[p.index].payload_kg - p.payload_kg for p in ver]
+        ax.plot(idx, err, mk, color=col, label=f"{tag} model (held out)")
+        if d.engine:
+            eng = [d.engine[tag].get(p.index, math.nan) - p.payload_kg for p in ver]
+            ax.plot(idx, eng, mk, mfc="none", color=col, label=f"{tag}, live engine")
+    ax.axhline(0, color="k", lw=0.8, label="truck scale")
+    ax.set_xlabel("pass")
+    ax.set_ylabel("estimate - scale (kg)")
+    sec = ax.secondary_yaxis("right", functions=(lambda y: 100 * y / RATED_PAYLOAD_KG,
+                                                 lambda p: p * RATED_PAYLOAD_KG / 100))
+    sec.set_ylabel("% of rated load")
+    ax.legend(fontsize=8, ncol=2)
+    ax.set_title("Payload per verified pass against the scale")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _plot_overview(d: Diagnosis, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    keys = [k for k in VARIABLES if k != "payload_x_direction"]
+    fig, axes = plt.subplots(2, (len(keys) + 1) // 2, figsize=(15, 6))
+    for ax, key in zip(axes.flat, keys, strict=False):
+        label, unit = VARIABLES[key]
+        for chan, col in (("hoist_a", "C3"), ("crowd_a", "C2")):
+            b = binned(d.base_residuals.variables[key], getattr(d.base_residuals, chan))
+            ax.errorbar(b["centres"], b["mean"], yerr=b["se"], fmt=".-", color=col,
+                        label=f"{chan[:5]} ({100 * b['explained']:.0f} %)")
+        ax.axhline(0, color="k", lw=0.5)
+        ax.set_xlabel(f"{label} ({unit})", fontsize=7)
+        ax.tick_params(labelsize=7)
+        ax.legend(fontsize=6)
+    for ax in list(axes.flat)[len(keys):]:
+        ax.axis("off")
+    fig.suptitle("Base model: residual current (A, bin means; % = variance explained) "
+                 "against each candidate variable", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def write_report(d: Diagnosis, out_dir: str | Path) -> Path:
+    """Write report.md, the plots and the extended model's params file into ``out_dir``."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    js = as_json(d)
+    top = d.found[0] if d.found else (js["ranked"][0]["name"] if js["ranked"] else None)
+    key = _signature(top)
+    _plot_cause(d, key, out / "residual_vs_cause.png",
+                f"Residual against {VARIABLES[key][0]}: "
+                + (f"before and after adding {top}" if d.found else "base model"))
+    _plot_payload(d, out / "payload_per_pass.png")
+    _plot_overview(d, out / "residuals_overview.png")
+    save_params(out / "extended.params.toml", d.extended_params)
+    b, e = js["base"]["payload"], js["extended"]["payload"]
+    lines = ["# Model diagnosis", ""]
+    files = ", ".join(js["data"]["measured_files"])
+    lines.append(f"Measured data: {files} ({js['data']['measured_hours']:.2f} h, "
+                 f"{js['data']['passes']} passes, {js['data']['verified_passes']} with a "
+                 f"scale weight). Calibration trials: {', '.join(js['data']['calib_files'])}.")
+    lines += ["", "## Finding", ""]
+    if d.found:
+        for i, n in enumerate(d.found, 1):
+            lines.append(f"{i}. **{cause(n)}** (model term `{n}`).")
+        lines.append("")
+        lines.append(
+            f"With {'this' if len(d.found) == 1 else 'these'} in the model, the payload error "
+            f"on the {e.get('passes', 0)} verified passes the model had not seen goes from "
+            f"{b.get('rms_kg', math.nan):.0f} kg RMS ({b.get('rms_pct_rated', math.nan):.2f} % "
+            f"of the {RATED_PAYLOAD_KG:,.0f} kg rated load; "
+            f"mean {b.get('mean_kg', math.nan):+.0f} kg)"
+            f" to {e.get('rms_kg', math.nan):.0f} kg RMS ({e.get('rms_pct_rated', math.nan):.2f} "
+            f"%; mean {e.get('mean_kg', math.nan):+.0f} kg).")
+        if d.engine:
+            be, ee = js["base"]["payload_engine"], js["extended"]["payload_engine"]
+            lines.append(f"The live engine on the same passes: {be.get('rms_kg', math.nan):.0f}"
+                         f" kg -> {ee.get('rms_kg', math.nan):.0f} kg RMS.")
+    else:
+        lines.append("**Nothing significant.** No candidate extension removed enough of the "
+                     "model's error on passes it had not seen to count as a finding; the base "
+                     "model's payload error on the verified passes is "
+                     f"{b.get('rms_kg', math.nan):.0f} kg RMS "
+                     f"({b.get('rms_pct_rated', math.nan):.2f} % of rated load).")
+    lines += ["", "## What the base model gets wrong", "",
+              "Measured minus model current, per channel, over the lift and swing of every pass "
+              f"(hoist {js['base']['residual_rms']['hoist_A']:.1f} A RMS, crowd "
+              f"{js['base']['residual_rms']['crowd_A']:.1f} A RMS; with the extension "
+              f"{js['extended']['residual_rms']['hoist_A']:.1f} A and "
+              f"{js['extended']['residual_rms']['crowd_A']:.1f} A).", "",
+              "![residual against the cause](residual_vs_cause.png)", "",
+              "Against every variable that a physical cause would make it follow (the "
+              "percentage is the share of the residual variance the bins explain):", "",
+              "![residuals against each variable](residuals_overview.png)", ""]
+    delay = js["residuals_against"]["time_shift"].get("implied_delay_s", {}).get("base")
+    if delay is not None:
+        lines.append(f"A time shift of {1000 * delay:+.0f} ms between current and motion would "
+                     "explain the hoist residual to first order.")
+    lines += ["", "## Candidates (first step)", "",
+              "| candidate | residual removed | t (critical) | held-out payload RMS | verdict |",
+              "|---|---|---|---|---|"]
+    for c in js["ranked"]:
+        verdict = "**added**" if c["name"] in d.found else (c["why"] or "significant")
+        lines.append(f"| `{c['name']}` | {100 * (c['score'] or 0):+.1f} % | "
+                     f"{c['t'] if c['t'] is not None else 'n/a'} ({c['t_crit']}) | "
+                     f"{c['payload_rms_kg']} kg | {verdict} |")
+    lines += ["", "## Payload per pass", "", "![payload per pass](payload_per_pass.png)", "",
+              "## The extended model", "",
+              f"Terms: {', '.join(d.extended_params.terms)}. Written to "
+              "`extended.params.toml` (load it with `shoveld estimate --params` or the "
+              "daemon; or re-identify with `shoveld calibrate --effects "
+              f"{','.join(d.found) or '...'}`).", "",
+              "| parameter | value | std err | unit |", "|---|---|---|---|"]
+    for n, v in js["extended"]["params"].items():
+        lines.append(f"| {n} | {v['value']:.6g} | {v['stderr']:.3g} | {v['unit']} |")
+    for term, h in d.extended_params.hyper.items():
+        if term in d.found and h:
+            lines.append(f"| {term} (hyper) | {h} | | |")
+    for k, v in js["extended"]["derived"].items():
+        lines.append(f"| {k} | {v:.4g} | | |")
+    lines += ["", "## Method", "",
+              "Each candidate is added on its own to the current model, identified by the same "
+              "calibration as the base model (on the calibration trials; with cross-validation "
+              "over verified passes when only operating data excites it), and judged pass by "
+              "pass on data it was not fitted on. A candidate is added when the per-pass "
+              f"improvement is significant (one-sided t, family-wise alpha {d.config.alpha} per "
+              f"step), removes at least {100 * d.config.min_gain:.0f} % of the held-out residual, "
+              "and does not worsen the held-out payload; the search repeats until none is."]
+    (out / "report.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return out / "report.md"
