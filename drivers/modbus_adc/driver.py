@@ -27,7 +27,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from pymodbus.client import ModbusSerialClient
+from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
 from pymodbus.framer import FramerType
 
@@ -35,7 +35,6 @@ from drivers.base import DeviceError, Driver, Reading, Sink
 from drivers.capture.clock import clock_wait_until
 from drivers.capture.format import RegisterRead
 from drivers.modbus_adc.channels import Channel, ChannelMap
-from drivers.modbus_adc.tcplite import ModbusTcpLite
 
 log = logging.getLogger(__name__)
 
@@ -240,9 +239,9 @@ class ModbusAdcDriver(Driver):
         c = self.config
         if self.client_factory is not None:
             return self.client_factory(c)
-        if c.transport == "tcp":  # register reads only: a small client, not pymodbus'
-            return ModbusTcpLite(c.host, port=int(c.port), timeout=c.timeout_s,
-                                 retries=c.retries)
+        if c.transport == "tcp":
+            return ModbusTcpClient(c.host, port=int(c.port), timeout=c.timeout_s,
+                                   retries=c.retries)
         return ModbusSerialClient(str(c.port), framer=FramerType.RTU, baudrate=c.baudrate,
                                   parity=c.parity, stopbits=c.stopbits, bytesize=c.bytesize,
                                   timeout=c.timeout_s, retries=c.retries)

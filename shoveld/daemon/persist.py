@@ -80,7 +80,7 @@ def connect(path: str | Path, readonly: bool = False) -> sqlite3.Connection:
     if str(mode).lower() != "wal":
         log.warning("%s: journal_mode is %s, not WAL", p, mode)
     con.execute("PRAGMA synchronous = FULL")
-    con.executescript(_SCHEMA)
+    con.executescript("BEGIN;" + _SCHEMA + "COMMIT;")  # all tables or none, even if killed
     con.execute("INSERT OR IGNORE INTO meta(key, value) VALUES ('schema', ?)",
                 (str(SCHEMA_VERSION),))
     return con

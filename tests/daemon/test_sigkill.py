@@ -30,6 +30,13 @@ def check_log(state: Path) -> tuple[list[int], int | None, list[int]]:
     con = sqlite3.connect(db_path(state))
     try:
         assert con.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
+        tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master")}
+        if "passes" not in tables:
+            # Killed after the file was created but before the schema was committed: an
+            # empty database is consistent (nothing had been written), and a restart
+            # creates the schema.
+            assert "trucks" not in tables
+            return [], None, []
         ids = [r[0] for r in con.execute("SELECT pass FROM passes ORDER BY pass")]
         assert ids == list(range(1, len(ids) + 1)), ids
         rows = con.execute("SELECT pass, truck, payload_kg, std_kg, valid, samples "
@@ -55,7 +62,15 @@ def test_daemon_killed_repeatedly_keeps_every_pass(tmp_path: Path) -> None:
     state = tmp_path / "state"
     cmd = [sys.executable, "-m", "shoveld", "-v", "replay", str(CAPTURE), "--fast",
            "--config", str(cfg), "--state-dir", str(state), "--zenoh-wait", "0"]
+    # Kill moments are drawn within a complete run's duration, measured first on its own
+    # state directory, so a faster replay still dies mid-run rather than after the end.
+    t0 = time.monotonic()
+    timing = [str(tmp_path / "timing") if a == str(state) else a for a in cmd]
+    subprocess.run([*timing, "--listen", f"tcp/127.0.0.1:{free_port()}"],
+                   capture_output=True, check=True, timeout=120)
+    run_s = time.monotonic() - t0
     before: tuple[list[int], int | None, list[int]] = ([], None, [])
+    killed = 0
     for i in range(KILLS + 1):
         last = i == KILLS
         port = free_port()
@@ -65,10 +80,12 @@ def test_daemon_killed_repeatedly_keeps_every_pass(tmp_path: Path) -> None:
             out, err = proc.communicate(timeout=120)
             assert proc.returncode == 0, err
         else:
-            time.sleep(rng.uniform(0.8, 4.0))
+            time.sleep(rng.uniform(0.1, 0.7) * run_s)
             proc.send_signal(signal.SIGKILL)
             out, err = proc.communicate(timeout=30)
-            assert proc.returncode == -signal.SIGKILL
+            # On a busy machine a run may still end before its kill: a complete run.
+            assert proc.returncode in (-signal.SIGKILL, 0), err
+            killed += proc.returncode == -signal.SIGKILL
         m = re.search(r"next pass (\d+), truck (\d+) with (\d+) passes", err)
         if m:  # it got as far as restoring: from exactly what the log held
             ids, cur, cur_passes = before
@@ -79,6 +96,7 @@ def test_daemon_killed_repeatedly_keeps_every_pass(tmp_path: Path) -> None:
             after = check_log(state)
             assert after[0][:len(before[0])] == before[0]  # nothing finished was lost
             before = after
+    assert killed >= KILLS * 2 // 3, f"only {killed} of {KILLS} runs were killed mid-run"
     ids, cur, cur_passes = before
     assert len(ids) >= 3  # the final complete run alone adds the capture's three passes
     assert cur is None  # the complete run closed its last truck
