@@ -69,7 +69,9 @@ def test_faults_are_reported_and_the_loop_keeps_its_rate(
             assert peer.stdout is not None and peer.stdout.readline().strip() == "up"
             assert wait_for(lambda: svc.health_msg and svc.health_msg["ok"], 5.0), \
                 problems_of(svc)
-            assert svc.health_msg is not None and svc.health_msg["zenoh"]["peers"] >= 1
+            # health is refreshed every period: the new peer shows in the next one
+            assert wait_for(lambda: svc.health_msg is not None
+                            and svc.health_msg["zenoh"]["peers"] >= 1, 5.0), svc.health_msg
             t_start, ticks0 = time.monotonic(), svc.loop_stats.ticks
             # a Zenoh peer that disappears without a goodbye
             os.kill(peer.pid, signal.SIGKILL)
