@@ -80,7 +80,10 @@ def test_faults_are_reported_and_the_loop_keeps_its_rate(
             vs.laser.babble = 1.0
             assert wait_for(lambda: any("laser" in p for p in problems_of(svc)), 5.0)
             seen["laser"] = problems_of(svc)
-            assert svc.assembler.state["laser"].state in ("stale", "disconnected", "invalid")
+            # its last good reading turns stale once older than max_age_s
+            assert wait_for(lambda: svc.assembler.state["laser"].state in
+                            ("stale", "disconnected", "invalid"), 5.0), \
+                svc.assembler.state["laser"]
             # a Modbus module that stops answering
             vs.adc_motors.silent = True
             assert wait_for(lambda: any(p.startswith("adc_motors") for p in problems_of(svc)),
