@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from shoveld.daemon.clock import Clock
@@ -101,11 +101,13 @@ class LoopStats:
 
 
 class PhaseLock:
-    """A first-order software PLL: keeps the loop's ticks ``delay_s`` after the master's
-    readings arrive.
+    """A first-order software PLL: keeps the loop's ticks a short delay after the
+    master's readings arrive.
 
     ``ref()`` returns the arrival time (loop clock) of the master's newest reading, or
-    None. After each tick, a new master reading gives the phase error
+    None; ``history(t)``, if given, the arrival times of the readings after ``t`` (so
+    that a late reading superseded before any tick saw it still counts in the jitter).
+    After each tick, a new master reading gives the phase error
     ``e = wrap(deadline - arrival - delay_s)`` modulo the loop period (positive: the
     ticks come later than wanted); the loop's grid moves by ``-gain * e``, clipped to
     ``max_step_s`` per tick. Clipping makes the lock robust: a reading delayed by the
@@ -116,21 +118,37 @@ class PhaseLock:
     ppm fast or slow leaves a constant phase offset of (drift per tick) / ``gain``
     (0.5 us per tick at 50 ppm and 100 Hz: 5 us).
 
+    The delay is ``delay_s`` at least. A reading that arrives later than the delay
+    misses its tick and waits a whole period, so while locked the delay is widened to
+    cover the arrival jitter the lock measures: every 100 readings it becomes the
+    spread between the median arrival and the latest 0.5 % of the last ``window``
+    arrivals, plus ``margin_s``, between ``delay_s`` and half a period.
+
     States: ``free_running`` (no master reading yet, or none for ``lost_after_s``: no
     corrections, the loop keeps its last phase), ``acquiring`` (readings, error still
     large), ``locked`` (mean absolute error under a tenth of a period).
     """
 
+    TAIL = 0.005
+    """Share of the master's readings the adaptive delay lets miss their tick."""
+
     def __init__(self, period_s: float, ref: Callable[[], float | None], *,
+                 history: Callable[[float], Sequence[float]] | None = None,
                  delay_s: float = 0.001, gain: float = 0.1, max_step_s: float | None = None,
-                 lost_after_s: float | None = None, window: int = 1000) -> None:
+                 lost_after_s: float | None = None, window: int = 1000,
+                 adaptive: bool = True, margin_s: float = 0.0003) -> None:
         if not 0 <= delay_s < period_s:
             raise ValueError("delay_s must be in [0, period)")
         if not 0 < gain <= 1:
             raise ValueError("gain must be in (0, 1]")
         self.period = period_s
         self.ref = ref
+        self.history = history
+        self.min_delay = delay_s
         self.delay = delay_s
+        """The delay in use (``delay_s`` or wider, see the class)."""
+        self.adaptive = adaptive
+        self.margin = margin_s
         self.gain = gain
         self.max_step = period_s / 50.0 if max_step_s is None else max_step_s
         self.lost_after = 10.0 * period_s if lost_after_s is None else lost_after_s
@@ -147,16 +165,25 @@ class PhaseLock:
         self._last_new = -math.inf
         self._window = window
         self._err = [0.0] * window
+        self._phase = [0.0] * window
+        """How long before its tick each recent reading arrived (negative: after it)."""
         self._i = 0
         self._n = 0
+        self._pn = 0
+        self._center = delay_s
+        """Typical time from a reading to its tick (the median of the recent ones)."""
 
     def correction(self, deadline: float, now: float) -> float:
         """How far to move the grid after the tick due at ``deadline`` (seconds)."""
         a = self.ref()
-        if a is None or a == self._last_ref:
+        last = self._last_ref
+        if a is None or a == last:
             if self.state != "free_running" and now - self._last_new > self.lost_after:
                 self.state = "free_running"
                 self.lost_count += 1
+                self._mean_abs = 0.25 * self.period  # settle again before "locked"
+                self._pn = 0  # and measure the jitter afresh
+                self._center = self.delay
             return 0.0
         self._last_ref = a
         self._last_new = now
@@ -164,8 +191,20 @@ class PhaseLock:
             return 0.0
         period = self.period
         half = 0.5 * period
-        if (deadline - a + half) % period - half < 0.0:
-            self.late += 1  # arrived after the tick it was meant for: waits a period
+        locked = self.state == "locked"
+        new = (self.history(last) if self.history is not None and last is not None
+               else None) or (a,)
+        c = self._center
+        for x in new:  # how long before the tick each new reading came (< 0: after it),
+            # within half a period of the typical arrival (further is ambiguous)
+            before = (deadline - x - c + half) % period - half + c
+            if before < 0.0:
+                self.late += 1  # missed the tick it was meant for: waited a period
+            if locked:  # the arrival jitter, once the lock has settled
+                self._phase[self._pn % self._window] = before
+                self._pn += 1
+                if self.adaptive and self._pn % 100 == 0:
+                    self._adapt_delay()
         e = (deadline - a - self.delay + half) % period - half
         self.last_error_s = e
         i = self._i
@@ -184,16 +223,28 @@ class PhaseLock:
         self.shift_s -= step
         return -step
 
+    def _adapt_delay(self) -> None:
+        n = min(self._pn, self._window)
+        if n < 200:
+            return
+        ph = sorted(self._phase[:n])
+        self._center = med = ph[n // 2]
+        tail = med - ph[int(self.TAIL * (n - 1))]  # how much later the late ones come
+        self.delay = min(max(self.min_delay, tail + self.margin), 0.5 * self.period)
+
     def as_dict(self) -> dict[str, Any]:
         n = min(self._n, self._window)
         d: dict[str, Any] = {"state": self.state, "delay_ms": round(1e3 * self.delay, 3),
+                             "min_delay_ms": round(1e3 * self.min_delay, 3),
                              "corrections": self.corrections,
                              "shift_ms": round(1e3 * self.shift_s, 3),
-                             "lost": self.lost_count,
-                             "late_pct": round(100.0 * self.late / max(1, self.corrections), 2)}
+                             "lost": self.lost_count, "late": self.late}
         if n:
             (p50, p99), _ = percentiles([abs(e) for e in self._err[:n]])
             d["phase_error_ms"] = {"p50": round(1e3 * p50, 3), "p99": round(1e3 * p99, 3)}
+        pn = min(self._pn, self._window)
+        if pn:
+            d["late_pct"] = round(100.0 * sum(1 for x in self._phase[:pn] if x < 0.0) / pn, 2)
         return d
 
 

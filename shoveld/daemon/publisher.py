@@ -207,9 +207,9 @@ class Publisher:
     def connected(self) -> bool:
         return self._session is not None
 
-    def put(self, topic: str, obj: dict[str, Any]) -> bool:
-        """Encode and publish; False if it did not go out (no session, nobody
-        subscribes to a loop topic, an error)."""
+    def put(self, topic: str, obj: dict[str, Any] | str | None) -> bool:
+        """Encode and publish (a ``str`` is JSON text already); False if it did not go
+        out (no session, nobody subscribes to a loop topic, an error)."""
         pub = self._pubs.get(topic)
         if pub is None:
             self.dropped += 1
@@ -218,7 +218,7 @@ class Publisher:
             self.unmatched += 1
             return False
         try:
-            pub.put(dumps(obj))
+            pub.put(obj if isinstance(obj, str) else dumps(obj))
         except Exception as e:  # noqa: BLE001 - never let the network take the loop down
             self.errors += 1
             self.last_error = f"put {topic}: {e}"

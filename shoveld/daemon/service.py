@@ -10,6 +10,7 @@ congestion control DROP, and queues finished passes.
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 import queue
@@ -32,12 +33,33 @@ from shoveld.daemon.store import ReadingStore
 from shoveld.engine.loop import Engine, LiveEstimate, PassResult, TruckResult
 from shoveld.model.params import ModelParams
 from shoveld.payload.trucks import Truck, rule_101020
+from shoveld.sample import Sample
 
 log = logging.getLogger(__name__)
 
 
 def _r(x: float, nd: int) -> float | None:
     return round(x, nd) if math.isfinite(x) else None
+
+
+def _jr(x: float, nd: int) -> str:
+    """``x`` rounded to ``nd`` decimals as JSON text (what ``dumps(_r(x, nd))`` gives)."""
+    return repr(round(x, nd)) if math.isfinite(x) else "null"
+
+
+_json_str = json.encoder.encode_basestring_ascii  # type: ignore[attr-defined]
+
+
+def joints_json(wall: float, s: Sample) -> str:
+    """The ``joints`` message as JSON text, written directly: the same text as
+    ``dumps`` of the equivalent dict (tested), at a fraction of the cost at 100 Hz."""
+    bad = s.invalid
+    return (f'{{"time":{_jr(wall, 3)},'
+            f'"swing_deg":{"null" if "swing_deg" in bad else _jr(s.swing_deg, 3)},'
+            f'"handle_deg":{"null" if "handle_deg" in bad else _jr(s.handle_deg, 3)},'
+            f'"crowd_m":{"null" if "crowd_m" in bad else _jr(s.crowd_m, 4)},'
+            f'"boom_deg":{"null" if "boom_deg" in bad else _jr(s.boom_deg, 3)},'
+            f'"invalid":[{",".join(_json_str(x) for x in sorted(bad))}]}}')
 
 
 JOINT_SIGNALS = frozenset({"swing_deg", "handle_deg", "crowd_m", "boom_deg"})
@@ -128,9 +150,10 @@ class Service:
             log.warning("loop.sync: no device %r here; the loop runs free", lc.sync)
             return None
         name = dev.name
-        latest_t = self.store.latest_t
-        return PhaseLock(1.0 / lc.rate_hz, lambda: latest_t(name), delay_s=lc.sync_delay_s,
-                         lost_after_s=dev.max_age_s)
+        store = self.store
+        return PhaseLock(1.0 / lc.rate_hz, lambda: store.latest_t(name),
+                         history=lambda t: store.times_after(name, t),
+                         delay_s=lc.sync_delay_s, lost_after_s=dev.max_age_s)
 
     @property
     def live_msg(self) -> dict[str, Any] | None:
@@ -149,6 +172,21 @@ class Service:
                "phase": ev.phase, "valid": valid, "pass": pass_index, "truck": truck_index}
         self._live_built = (live, msg)
         return msg
+
+    def live_json(self) -> str | None:
+        """:attr:`live_msg` as JSON text, written directly (the same text as ``dumps``)."""
+        live = self._live
+        if live is None:
+            return None
+        ev, pass_index, truck_index = live
+        if ev.valid and math.isfinite(ev.payload_kg):
+            numbers = f'"payload_kg":{_jr(ev.payload_kg, 1)},"std_kg":{_jr(ev.std_kg, 1)}'
+            valid = "true"
+        else:
+            numbers, valid = '"payload_kg":null,"std_kg":null', "false"
+        return (f'{{"time":{_jr(self.clock.wall(ev.time_s), 3)},{numbers},'
+                f'"phase":{_json_str(ev.phase)},"valid":{valid},"pass":{int(pass_index)},'
+                f'"truck":{int(truck_index)}}}')
 
     # -- lifecycle ---------------------------------------------------------------------------
     def _health_of(self, name: str) -> Any:
@@ -255,19 +293,12 @@ class Service:
         self._tick_no += 1
         # joints first: they need only the sample, not the engine's step
         if k % self._joints_every == 0:
-            bad = s.invalid
-            if self.publisher.put("joints", {
-                    "time": round(self.clock.wall(t), 3),
-                    "swing_deg": None if "swing_deg" in bad else _r(s.swing_deg, 3),
-                    "handle_deg": None if "handle_deg" in bad else _r(s.handle_deg, 3),
-                    "crowd_m": None if "crowd_m" in bad else _r(s.crowd_m, 4),
-                    "boom_deg": None if "boom_deg" in bad else _r(s.boom_deg, 3),
-                    "invalid": sorted(bad) if bad else []}) and pending:
+            if self.publisher.put("joints", joints_json(self.clock.wall(t), s)) and pending:
                 self._published(True)
         for ev in engine.step(s):
             self._event(ev, t)
         if k % self._live_every == 0 and self._live is not None:
-            if self.publisher.put("payload/live", self.live_msg) and self._pending_arrivals:
+            if self.publisher.put("payload/live", self.live_json()) and self._pending_arrivals:
                 self._published(False)
         if t >= self._next_health:
             self._next_health = t + self.cfg.loop.health_period_s

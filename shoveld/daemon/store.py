@@ -83,6 +83,11 @@ class ReadingStore:
         under no circumstances without the lock: driver threads append to it)."""
         return self._recent[device]
 
+    def times_after(self, device: str, t: float) -> list[float]:
+        """Reading times (``t_host``) of the device's stored readings newer than ``t``."""
+        snapshot = tuple(self._recent[device])  # one C-level copy: safe against appends
+        return [s.reading.t_host for s in snapshot if s.reading.t_host > t]
+
     def latest_t(self, device: str) -> float | None:
         """Reading time (``t_host``) of the newest reading of ``device``, None before any."""
         try:
