@@ -213,9 +213,12 @@ def main() -> int:
             st_.all.clear()
         prof_out = args.profile_out or os.path.join(tmp, "py-spy.raw")
         spy = start_py_spy(args.seconds, prof_out) if args.profile else None
+        master = args.sync if args.sync in svc.latency_by_device else "mti"
+        stored0 = svc.store.count(master)
         cpu0, t0, threads0 = time.process_time(), time.monotonic(), thread_cpu_s()
         time.sleep(args.seconds)
         cpu, wall = time.process_time() - cpu0, time.monotonic() - t0
+        stored = svc.store.count(master) - stored0
         threads = cpu_by_thread(threads0, thread_cpu_s(), wall)
         stop.set()
         loop.join()
@@ -231,7 +234,6 @@ def main() -> int:
     sub = json.loads(child.stdout.readline())
     child.wait(10)
     late = st.all_late[2 * int(args.rate):]  # skip the first two seconds (start-up)
-    master = args.sync if args.sync in svc.latency_by_device else "mti"
     others = [x for n, ls in svc.latency_by_device.items() if n != master for x in ls.all]
     res: dict[str, Any] = {
         "rate_hz": args.rate, "publish_rate_hz": pub_rate, "seconds": round(wall, 1),
@@ -242,6 +244,8 @@ def main() -> int:
         "arrival_to_publish_ms": pct(svc.latency.all),
         "arrival_to_publish_master_ms": {"device": master,
                                          **pct(svc.latency_by_device[master].all)},
+        # readings superseded by a newer one before any tick used them have no latency
+        "master_readings_never_used": max(0, stored - len(svc.latency_by_device[master].all)),
         "arrival_to_publish_others_ms": pct(others),
         "arrival_to_publish_by_device_ms": {n: pct(ls.all) for n, ls in
                                             svc.latency_by_device.items() if ls.all},
@@ -268,7 +272,8 @@ def main() -> int:
               "all sensors)")
         m, o = res["arrival_to_publish_master_ms"], res["arrival_to_publish_others_ms"]
         print(f"  master {m['device']:<8} p50 {m['p50']:.3f} ms  p99 {m['p99']:.3f} ms  "
-              f"(n={m['n']}, sync {args.sync})")
+              f"(n={m['n']}, sync {args.sync}; {res['master_readings_never_used']} superseded "
+              "before a tick used them)")
         print(f"  others          p50 {o['p50']:.3f} ms  p99 {o['p99']:.3f} ms  (n={o['n']}, "
               "not locked: up to one period)")
         for n, d in res["arrival_to_publish_by_device_ms"].items():
