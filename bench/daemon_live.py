@@ -148,7 +148,7 @@ def summarize_py_spy(path: str, top: int = 25) -> list[tuple[float, str]]:
         count = int(n)
         total += count
         frames = stack.split(";")
-        thread = re.sub(r"\s*\(.*?\)", "", frames[0]).replace("thread ", "").strip()
+        thread = frames[0].rsplit(":", 1)[-1].strip().strip('"')
         seen = {f"[thread {thread}]"}
         incl[f"[thread {thread}]"] += count
         for fr in frames[1:]:
