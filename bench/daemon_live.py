@@ -10,8 +10,13 @@ every ``joints`` message it receives. Figures:
 * arrival -> publish: from a reading reaching the daemon's store to the put of the
   first message computed from it (``joints`` for the arm sensors and the boom
   inclinometer, ``payload/live`` for the motor currents), for the phase-lock master
-  (``--sync``, default the MTi) and for the other sensors separately. The others are
-  not locked, so they wait 0-10 ms for the next tick: bounded by one period;
+  (``--sync``, default the MTi) and for the other sensors separately, and per device.
+  The Modbus modules are polled by the host, so with ``[loop] align_polls`` (on with
+  ``sync``; ``--no-align-polls`` for the comparison) each poll starts its measured round
+  trip before a tick and its answer lands just before it. The AR4000 laser streams on
+  its own free-running sample clock (no documented trigger or sync input), so its
+  readings wait anywhere from 0 to one loop period (10 ms) for a tick, and nothing on
+  the host can change that;
 * tick -> subscriber: from the tick's deadline to the other process receiving the
   ``joints`` message (processing + Zenoh over loopback); the other process subscribes
   to every topic, like a cab, so nothing is skipped for want of a subscriber;
@@ -22,7 +27,7 @@ every ``joints`` message it receives. Figures:
   samples for a flame graph).
 
 Usage: ``.venv/bin/python bench/daemon_live.py [--seconds 60] [--sync mti|none]
-[--publish-rate 10] [--profile] [--json]``
+[--publish-rate 10] [--no-align-polls] [--profile] [--json]``
 """
 
 from __future__ import annotations
@@ -170,6 +175,8 @@ def main() -> int:
     ap.add_argument("--sync", default="mti",
                     help="[loop] sync: the device the ticks are phase-locked to, or 'none'")
     ap.add_argument("--sync-delay", type=float, default=0.001, help="[loop] sync_delay_s")
+    ap.add_argument("--no-align-polls", action="store_true",
+                    help="[loop] align_polls = false: Modbus polls on their own schedule")
     ap.add_argument("--profile", action="store_true", help="py-spy the run (GIL holder)")
     ap.add_argument("--profile-out", default=None, help="keep py-spy's raw samples here")
     ap.add_argument("--json", action="store_true")
@@ -191,7 +198,7 @@ def main() -> int:
         cfg = parse_config({
             "shovel": {"id": "bench", "params": str(PARAMS), "state_dir": tmp},
             "loop": {"rate_hz": args.rate, "sync": args.sync,
-                     "sync_delay_s": args.sync_delay},
+                     "sync_delay_s": args.sync_delay, "align_polls": not args.no_align_polls},
             # every tick publishes, so arrival -> publish is not stretched by decimation
             "zenoh": {"listen": [f"tcp/127.0.0.1:{port}"], "joints_rate_hz": pub_rate,
                       "live_rate_hz": pub_rate},
@@ -257,6 +264,8 @@ def main() -> int:
         "passes": svc.passes_written,
         "drivers": {n: {"rate_hz": d.get("rate_hz"), "state": d.get("state")}
                     for n, d in (health.get("drivers") or {}).items()},
+        "align_polls": {n: d["align"] for n, d in (health.get("drivers") or {}).items()
+                        if "align" in d},
     }
     if profile is not None:
         res["profile_gil_percent"] = profile
@@ -275,10 +284,12 @@ def main() -> int:
               f"(n={m['n']}, sync {args.sync}; {res['master_readings_never_used']} superseded "
               "before a tick used them)")
         print(f"  others          p50 {o['p50']:.3f} ms  p99 {o['p99']:.3f} ms  (n={o['n']}, "
-              "not locked: up to one period)")
+              "not locked; Modbus polls aligned unless --no-align-polls)")
         for n, d in res["arrival_to_publish_by_device_ms"].items():
             print(f"    {n:<12} p50 {d['p50']:.3f} ms  p99 {d['p99']:.3f} ms")
         print(f"phase lock       {res['sync']}")
+        for n, d in res["align_polls"].items():
+            print(f"aligned polls    {n}: {d}")
         print(f"tick->subscriber p50 {s['p50']:.3f} ms  p99 {s['p99']:.3f} ms  (other process)")
         print(f"tick work        p50 {res['tick_work_ms']['p50']:.3f} ms  p99 "
               f"{res['tick_work_ms']['p99']:.3f} ms")

@@ -70,6 +70,11 @@ class DeviceError(RuntimeError):
 
 Sink = Callable[[Reading], None]
 
+TickHint = Callable[[], "tuple[float, float] | None"]
+"""The consumer's tick grid on the driver's clock: ``(a tick deadline, tick period)``, or
+None while there is no grid. A driver that polls its device can then time each poll so
+the answer lands just before a tick instead of waiting up to a period for one."""
+
 
 class Driver(ABC):
     """Base class of every device driver."""
@@ -95,6 +100,11 @@ class Driver(ABC):
     @abstractmethod
     def close(self) -> None:
         """Release the transport; must be safe to call twice."""
+
+    def align_to_ticks(self, hint: TickHint | None) -> bool:
+        """Time polls by ``hint`` (None: the driver's own schedule again); True if this
+        driver can. Streaming devices send on their own clock, so by default it cannot."""
+        return False
 
     def emit(self, sink: Sink, reading: Reading) -> None:
         self.health.messages += 1

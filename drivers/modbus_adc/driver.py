@@ -14,6 +14,12 @@ After ``reconnect_after`` consecutive polls the module did not answer at all, ``
 raises :class:`~drivers.base.DeviceError` and the base class reconnects with
 back-off.
 
+With a tick hint (:meth:`ModbusAdcDriver.align_to_ticks`, set by the daemon from its
+loop), each poll is started its measured round trip *before* a tick of the consumer's
+grid, so the answer lands just before that tick instead of anywhere up to a tick period
+earlier; health ``align`` shows the lead in use and how many answers still came after
+their tick. Without a hint the polls keep their own free-running schedule.
+
 Every read can be logged (``register_log``) as a
 :class:`~drivers.capture.format.RegisterRead`; ``shoveld record`` uses it.
 """
@@ -31,7 +37,7 @@ from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
 from pymodbus.framer import FramerType
 
-from drivers.base import DeviceError, Driver, Reading, Sink
+from drivers.base import DeviceError, Driver, Reading, Sink, TickHint
 from drivers.capture.clock import clock_wait_until
 from drivers.capture.format import RegisterRead
 from drivers.modbus_adc.channels import Channel, ChannelMap
@@ -201,6 +207,77 @@ def _new_channel_health() -> dict[str, Any]:
             "stale": True, "last_error": None}
 
 
+class PollAligner:
+    """When to start polls so that their answers land just before the consumer's ticks.
+
+    The lead (how long before its tick a poll starts) is a high percentile of the recent
+    round trips, measured from the *planned* start (so a late wake-up of the thread
+    counts), plus a margin, at most ``max_lead_frac`` of a tick period: an answer that
+    comes early waits at most that long, and a host stall that makes a few polls slow
+    cannot push the polls far ahead of their ticks. Polls that timed out are not round
+    trips and are left out. Plain arithmetic on the times it is given (no clock, no
+    threads), so it is tested on simulated times.
+    """
+
+    def __init__(self, window: int = 300, pct: float = 99.0, margin_s: float = 0.0003,
+                 initial_lead_s: float = 0.002, max_lead_frac: float = 0.5,
+                 update_every: int = 50) -> None:
+        self.window = window
+        self.pct = pct
+        self.margin = margin_s
+        self.max_lead_frac = max_lead_frac
+        self.update_every = update_every
+        self.lead = initial_lead_s
+        """Start each poll this long before its tick (seconds, before the tick cap)."""
+        self.max_lead = math.inf
+        self._rtt = [0.0] * window
+        self._n = 0
+        self.polls = 0
+        self.late = 0
+        """Answers that came after the tick they were timed for."""
+        self.late_by_max = 0.0
+
+    def lead_for(self, tick_period: float) -> float:
+        """The lead in use for ticks of ``tick_period``."""
+        self.max_lead = self.max_lead_frac * tick_period
+        return min(self.lead, self.max_lead)
+
+    def record(self, rtt: float | None, answered_at: float, tick: float) -> None:
+        """One aligned poll: its round trip and answer time (rtt None: it timed out, which
+        is no round trip and no late answer - the channels' health says it)."""
+        self.polls += 1
+        if rtt is None:
+            return
+        if answered_at > tick:
+            self.late += 1
+            if answered_at - tick > self.late_by_max:
+                self.late_by_max = answered_at - tick
+        self._rtt[self._n % self.window] = rtt
+        self._n += 1
+        n = self._n
+        if n < self.update_every:  # warming up: the slowest so far
+            self.lead = max(self.lead if n > 1 else 0.0, rtt + self.margin)
+        elif n % self.update_every == 0:
+            self.lead = self._percentile() + self.margin
+
+    def _percentile(self) -> float:
+        n = min(self._n, self.window)
+        s = sorted(self._rtt[:n])
+        return s[min(n - 1, int(self.pct / 100.0 * (n - 1) + 0.5))]
+
+    def as_dict(self, state: str) -> dict[str, Any]:
+        n = min(self._n, self.window)
+        d: dict[str, Any] = {"state": state, "polls": self.polls, "late": self.late,
+                             "late_max_ms": round(1e3 * self.late_by_max, 3)}
+        if state == "aligned":
+            d["lead_ms"] = round(1e3 * min(self.lead, self.max_lead), 3)
+        if n:
+            s = sorted(self._rtt[:n])
+            d["rtt_ms"] = {"p50": round(1e3 * s[n // 2], 3),
+                           "p99": round(1e3 * self._percentile(), 3)}
+        return d
+
+
 class ModbusAdcDriver(Driver):
     """Polls an analog-input module and emits its channels in engineering units."""
 
@@ -228,6 +305,25 @@ class ModbusAdcDriver(Driver):
                       for address, count, chans in self._blocks]
         """Per block: the channels' offsets, decoders and health dicts (built once)."""
         self._channel_health = tuple(chh[c.name] for c in config.channels)
+        self.tick_hint: TickHint | None = None
+        """The consumer's tick grid (:meth:`align_to_ticks`); None: free-running polls."""
+        self.aligner = PollAligner()
+        self._target: float | None = None
+        """The tick the current poll is timed for (aligned polls)."""
+        self._align_state = "off"
+
+    def align_to_ticks(self, hint: TickHint | None) -> bool:
+        """Start each poll so its answer lands just before a tick of ``hint``'s grid (a
+        tick that is a poll period after the previous one), instead of on the driver's
+        own schedule; None restores that schedule."""
+        self.tick_hint = hint
+        self._target = None
+        self._align_state = "off" if hint is None else "waiting"
+        if hint is None:
+            self.health.extra.pop("align", None)
+        else:
+            self.health.extra["align"] = self.aligner.as_dict(self._align_state)
+        return True
 
     @classmethod
     def from_config(cls, name: str, d: Mapping[str, Any], **kw: Any) -> ModbusAdcDriver:
@@ -255,6 +351,7 @@ class ModbusAdcDriver(Driver):
         self._client = client
         self._failed_polls = 0
         self._next_poll = None
+        self._target = None
 
     def close(self) -> None:
         client, self._client = self._client, None
@@ -345,6 +442,69 @@ class ModbusAdcDriver(Driver):
     def read(self, sink: Sink) -> None:
         if self._client is None:
             raise DeviceError("Modbus client not open")
+        hint = self.tick_hint
+        if hint is not None:
+            grid = hint()
+            if grid is not None and grid[1] <= 1.0 / self.config.poll_hz * (1.0 + 1e-9):
+                self._read_aligned(sink, grid[0], grid[1])
+                return
+            self._set_align_state("waiting" if grid is None else "off: polls faster than ticks")
+        self._read_free(sink)
+
+    def _set_align_state(self, state: str) -> None:
+        if state != self._align_state:
+            self._align_state = state
+            self._target = None
+            self.health.extra["align"] = self.aligner.as_dict(state)
+
+    def _read_aligned(self, sink: Sink, tick: float, tick_period: float) -> None:
+        """One poll timed so that its answer lands just before a tick of the grid
+        ``tick + k * tick_period`` (which the caller re-reads before every wait, so the
+        polls follow a grid that moves)."""
+        self._set_align_state("aligned")
+        period = 1.0 / self.config.poll_hz
+        clock = self.clock
+        al = self.aligner
+        lead = al.lead_for(tick_period)
+        now = clock()
+        ticks = (period / tick_period)
+        whole = abs(ticks - round(ticks)) < 1e-6
+        if self._next_poll is None:  # where the next answer is wanted
+            self._next_poll = now + lead
+        # the grid tick nearest to the wanted time (the first one we can still make at start)
+        k = round((self._next_poll - tick) / tick_period) if self._target is not None else \
+            math.ceil((self._next_poll - tick) / tick_period - 1e-9)
+        target = tick + k * tick_period
+        start = target - lead
+        if now > target:  # missed it (slow answer, late thread): the next tick we can make
+            target = tick + math.ceil((now + lead - tick) / tick_period - 1e-9) * tick_period
+            self._next_poll = target
+            self._target = target
+            return
+        self._target = target
+        if now < start:
+            clock_wait_until(clock, start, max_real_s=0.05)
+            if clock() < start:
+                return  # not yet: the next read() times it again on a fresh hint
+        polled = clock()
+        timeouts = self.health.timeouts
+        reading = self.poll(sink)
+        begun = start if start > now else now
+        al.record(None if self.health.timeouts != timeouts else reading.t_host - begun,
+                  reading.t_host, target)
+        self._next_poll = (target if whole else self._next_poll) + period
+        if not whole and self._next_poll < polled - period:  # fell behind: do not burst
+            self._next_poll = polled + period
+        if al.polls % 50 == 0 or reading.t_host > target:
+            self.health.extra["align"] = al.as_dict("aligned")
+        if self._failed_polls >= self.config.reconnect_after:
+            n = self._failed_polls
+            self._failed_polls = 0
+            raise DeviceError(f"Modbus module at {self.config.endpoint} answered none of the "
+                              f"last {n} polls")
+
+    def _read_free(self, sink: Sink) -> None:
+        """One poll on the driver's own schedule (``poll_hz`` from the first poll)."""
         period = 1.0 / self.config.poll_hz
         now = self.clock()
         if self._next_poll is None:

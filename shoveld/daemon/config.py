@@ -74,6 +74,9 @@ class LoopConfig:
     """Device whose readings the ticks are phase-locked to (``none``: free-running)."""
     sync_delay_s: float = 0.001
     """With ``sync``: ticks fall this long after the master's readings arrive."""
+    align_polls: bool = False
+    """Host-polled devices (Modbus) time their polls to answer just before a tick
+    (default: on when ``sync`` is)."""
 
 
 @dataclass(frozen=True)
@@ -351,6 +354,20 @@ def check_sync(where: str, loop: LoopConfig, devices: Mapping[str, DeviceConfig]
                 "multiple of it")
 
 
+def check_align(where: str, loop: LoopConfig, devices: Mapping[str, DeviceConfig]) -> None:
+    """An explicit ``loop.align_polls = true`` needs polls no faster than the ticks (each
+    poll gets its own tick); by default such a device just keeps its own schedule."""
+    if not loop.align_polls:
+        return
+    for dev in devices.values():
+        rate = device_rate_hz(dev) if dev.kind in ADC_KINDS else None
+        if rate is not None and rate > loop.rate_hz * (1.0 + 1e-9):
+            raise ConfigError(
+                f"{where}: key 'loop.align_polls': device '{dev.name}' polls at {rate:g} Hz, "
+                f"faster than the loop ({loop.rate_hz:g} Hz), so its polls cannot each be "
+                "timed for a tick; lower its poll_hz or set align_polls = false")
+
+
 # -- the file ------------------------------------------------------------------------------
 
 def _check_zenoh_extra(where: str, extra: Mapping[str, Any]) -> None:
@@ -393,7 +410,9 @@ def parse_config(doc: Mapping[str, Any], where: str = "<config>",
                       watchdog_max_late_s=lp.number("watchdog_max_late_s", 2.0, positive=True),
                       sync=lp.string("sync", "none"))
     loop = dataclasses.replace(loop, sync_delay_s=lp.number(
-        "sync_delay_s", 0.001, lo=0.0, hi=0.5 / loop.rate_hz))
+        "sync_delay_s", 0.001, lo=0.0, hi=0.5 / loop.rate_hz),
+        align_polls=lp.boolean("align_polls", loop.sync != "none"))
+    align_explicit = lp.has("align_polls")
     lp.done()
 
     zr = _Reader(where, top.table("zenoh"), "zenoh.")
@@ -457,6 +476,8 @@ def parse_config(doc: Mapping[str, Any], where: str = "<config>",
         devices = {}
     if devices:
         check_sync(where, loop, devices)
+        if align_explicit:
+            check_align(where, loop, devices)
     top.done()
     return DaemonConfig(path=None, shovel_id=shovel_id, params_path=params, state_dir=state_dir,
                         loop=loop, zenoh=zc, installation=inst, engine=engine, devices=devices,

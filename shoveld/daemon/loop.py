@@ -263,12 +263,28 @@ class FixedRateLoop:
         self.phase_lock = phase_lock
         self.behind_s = 0.0
         """How far the current tick started after its deadline (watchdog health)."""
+        self.base: float | None = None
+        """Tick ``k`` is due at ``base + k * period`` while running (None otherwise)."""
+
+    def tick_hint(self) -> tuple[float, float] | None:
+        """(a tick deadline, the period) of the running grid, for drivers that time their
+        polls to land just before ticks (:class:`drivers.base.TickHint`); any thread."""
+        base = self.base
+        return None if base is None else (base, self.period)
 
     def run(self, stop: threading.Event, done: Callable[[], bool] | None = None,
             start: float | None = None, max_ticks: int | None = None) -> None:
+        base = self.clock.now() if start is None else start
+        self.base = base
+        try:
+            self._run(stop, done, max_ticks, base)
+        finally:
+            self.base = None
+
+    def _run(self, stop: threading.Event, done: Callable[[], bool] | None,
+             max_ticks: int | None, base: float) -> None:
         clock, period, stats = self.clock, self.period, self.stats
         pll = self.phase_lock
-        base = clock.now() if start is None else start
         k = 0
         while not stop.is_set():
             deadline = base + k * period
@@ -287,6 +303,7 @@ class FixedRateLoop:
                 break
             if pll is not None:
                 base += pll.correction(deadline, end)
+                self.base = base
             next_deadline = base + k * period
             if end > next_deadline:
                 stats.overruns += 1

@@ -104,6 +104,7 @@ class Service:
         self.phase_lock = self._make_phase_lock()
         self.loop = FixedRateLoop(self.clock, cfg.loop.rate_hz, self._safe_tick,
                                   self.loop_stats, self.phase_lock)
+        self.aligned_drivers = self._align_polls()
         self.tick_errors = 0
         self._consecutive_errors = 0
         self.passlog: PassLog | None = None
@@ -154,6 +155,16 @@ class Service:
         return PhaseLock(1.0 / lc.rate_hz, lambda: store.latest_t(name),
                          history=lambda t: store.times_after(name, t),
                          delay_s=lc.sync_delay_s, lost_after_s=dev.max_age_s)
+
+    def _align_polls(self) -> list[str]:
+        """``[loop] align_polls``: host-polled drivers time their polls by the loop's grid.
+        Live clocks only, like the phase lock: on a simulated clock the drivers' schedule
+        must stay the capture's for replays to be deterministic."""
+        if not self.cfg.loop.align_polls or self.clock.simulated:
+            return []
+        hint = self.loop.tick_hint  # the loop clock is the drivers' time base live
+        return [name for name, drv in self.drivers.items()
+                if getattr(drv, "align_to_ticks", None) is not None and drv.align_to_ticks(hint)]
 
     @property
     def live_msg(self) -> dict[str, Any] | None:
