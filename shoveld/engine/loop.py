@@ -57,7 +57,7 @@ class EngineConfig:
     rls: RlsConfig = field(default_factory=RlsConfig)
 
 
-@dataclass
+@dataclass(slots=True)
 class LiveEstimate:
     time_s: float
     phase: str
@@ -162,14 +162,16 @@ class Engine:
             events.extend(self._transition(prev, ph, t))
         valid = False
         settled = ph in ESTIMATING and t - self.dig_end >= self.cfg.settle_s
-        out = self.lagged.push(t, (z_th, z_d, 0.0 if z_sw != z_sw else z_sw),
-                               (s, settled, self.pass_index))
+        lag = self.lagged
+        tag = lag.push_tag(t, (z_th, z_d, 0.0 if z_sw != z_sw else z_sw),
+                           (s, settled, self.pass_index))
         if self.cfg.payload_rates == "kalman":
             if settled and self.rls is not None:
                 valid = self._update(s, th, d, sw, thd, dd, swd, thdd, ddd, swdd)
-        elif out is not None:
-            (s_lag, settled_lag, pass_lag), kin = out
+        elif tag is not None:
+            s_lag, settled_lag, pass_lag = tag
             if settled_lag and pass_lag == self.pass_index and self.rls is not None:
+                kin = lag.derivatives()  # the fit only where it is used
                 valid = self._update(s_lag, *kin[0], *kin[1], *kin[2])
         elif ph in ESTIMATING:
             self.invalid_updates += 1
@@ -238,7 +240,7 @@ class Engine:
                 swd: float, thdd: float, ddd: float, swdd: float) -> bool:
         """Queue one sample for the payload filter if its inputs are valid."""
         i_h = s.hoist1_a + s.hoist2_a
-        if (any(n in s.invalid for n in NEEDED) or math.isnan(i_h) or math.isnan(s.crowd_a)
+        if (not s.invalid.isdisjoint(NEEDED) or math.isnan(i_h) or math.isnan(s.crowd_a)
                 or math.isnan(th) or math.isnan(d)):
             self.invalid_updates += 1
             return False

@@ -47,9 +47,12 @@ class JointFilter:
         self._last_t: float | None = None
         self._coast = 0.0
         self._steady: tuple[float, float, float] | None = None
+        self._qva = [0.0, 0.0, 0.0]
+        """The state while steady (``kf.x`` is stale then; see :meth:`_leave_steady`)."""
         self._prev_p = 0.0
 
     def reset(self, z: float) -> None:
+        self._leave_steady()
         self.kf.x = np.array([[z], [0.0], [0.0]])
         self.kf.P = np.diag([self.cfg.meas_std**2, 1.0, 10.0])
 
@@ -62,9 +65,10 @@ class JointFilter:
             self._last_t = t
             return z, 0.0, 0.0
         self._last_t = t
-        if self._steady is not None and not math.isnan(z):
-            return self._steady_update(z)
-        self._steady = None
+        if self._steady is not None:
+            if z == z:  # not NaN
+                return self._steady_update(z)
+            self._leave_steady()
         self.kf.predict()
         if math.isnan(z):
             self._coast += self.dt
@@ -80,17 +84,38 @@ class JointFilter:
                 # so the update needs no matrix algebra until a gap disturbs it.
                 k = self.kf.K
                 self._steady = (float(k[0, 0]), float(k[1, 0]), float(k[2, 0]))
+                x = self.kf.x
+                self._qva = [float(x[0, 0]), float(x[1, 0]), float(x[2, 0])]
             self._prev_p = p00
         x = self.kf.x
         return float(x[0, 0]), float(x[1, 0]), float(x[2, 0])
 
     def _steady_update(self, z: float) -> tuple[float, float, float]:
-        x = self.kf.x
+        """Steady-state update on the state held as Python floats (the same double
+        arithmetic as on ``kf.x``, without a numpy element access per term); ``kf.x``
+        is written back when the steady state ends (:meth:`state`)."""
+        qva = self._qva
+        q, v, a = qva
         dt = self.dt
-        q, v, a = float(x[0, 0]), float(x[1, 0]), float(x[2, 0])
         q, v = q + v * dt + 0.5 * a * dt * dt, v + a * dt
         k0, k1, k2 = self._steady  # type: ignore[misc]
         e = z - q
-        q, v, a = q + k0 * e, v + k1 * e, a + k2 * e
-        x[0, 0], x[1, 0], x[2, 0] = q, v, a
+        qva[0] = q = q + k0 * e
+        qva[1] = v = v + k1 * e
+        qva[2] = a = a + k2 * e
         return q, v, a
+
+    def _leave_steady(self) -> None:
+        """Back to filterpy's full update: put the float state into ``kf.x``."""
+        if self._steady is not None:
+            x = self.kf.x
+            x[0, 0], x[1, 0], x[2, 0] = self._qva
+            self._steady = None
+
+    def state(self) -> tuple[float, float, float]:
+        """The current (q, q', q'') estimate."""
+        if self._steady is not None:
+            q, v, a = self._qva
+            return q, v, a
+        x = self.kf.x
+        return float(x[0, 0]), float(x[1, 0]), float(x[2, 0])

@@ -44,6 +44,15 @@ class FixedLagSavgol(Generic[T]):
              ) -> tuple[T, np.ndarray] | None:
         """Add a sample; once the window is full, return the centre sample's tag and a
         (3, n_signals) array of value, rate and acceleration. NaN or a time gap restarts."""
+        tag_c = self.push_tag(t, values, tag)
+        if self._count < self.window:  # (not full, or restarted by a NaN)
+            return None
+        return tag_c, self.derivatives()  # type: ignore[return-value]
+
+    def push_tag(self, t: float, values: tuple[float, ...], tag: T) -> T | None:
+        """:meth:`push` without the fit: the centre sample's tag once the window is full
+        (else None); :meth:`derivatives` then gives its fit. The live loop needs the fit
+        for about one sample in five (settled lift and swing), so it asks only then."""
         missing = False
         for v in values:
             if v != v:  # NaN
@@ -55,11 +64,18 @@ class FixedLagSavgol(Generic[T]):
         if missing:
             return None
         w, pos = self.window, self._pos
-        self._ring[pos] = values
-        self._ring[pos + w] = values
+        ring = self._ring
+        ring[pos] = values
+        ring[pos + w] = values
         self._pos = (pos + 1) % w
         self._count += 1
         self.tags.append(tag)
         if self._count < w:
             return None
-        return self.tags[self.half], self.coeffs @ self._ring[self._pos:self._pos + w]
+        return self.tags[self.half]
+
+    def derivatives(self) -> np.ndarray:
+        """(3, n_signals) value, rate and acceleration at the centre of the current window
+        (valid after :meth:`push_tag` returned a tag)."""
+        pos = self._pos
+        return self.coeffs @ self._ring[pos:pos + self.window]
