@@ -211,17 +211,19 @@ class PollAligner:
     """When to start polls so that their answers land just before the consumer's ticks.
 
     The lead (how long before its tick a poll starts) is a high percentile of the recent
-    round trips, measured from the *planned* start (so a late wake-up of the thread
-    counts), plus a margin, at most ``max_lead_frac`` of a tick period: an answer that
-    comes early waits at most that long, and a host stall that makes a few polls slow
-    cannot push the polls far ahead of their ticks. Polls that timed out are not round
+    round trips (p99.5 of the last 1000, 20 s at 50 Hz, updated every 100), measured
+    from the *planned* start (so a late wake-up of the thread counts), plus a margin,
+    at most ``max_lead_frac`` of a tick period. An answer after its tick waits a whole
+    period, one that comes early only the lead, so the lead errs on the early side; the
+    cap bounds that wait, and a host stall that makes a few polls slow cannot push the
+    polls far ahead of their ticks. Polls that timed out are not round
     trips and are left out. Plain arithmetic on the times it is given (no clock, no
     threads), so it is tested on simulated times.
     """
 
-    def __init__(self, window: int = 300, pct: float = 99.0, margin_s: float = 0.0003,
+    def __init__(self, window: int = 1000, pct: float = 99.5, margin_s: float = 0.0005,
                  initial_lead_s: float = 0.002, max_lead_frac: float = 0.5,
-                 update_every: int = 50) -> None:
+                 update_every: int = 100) -> None:
         self.window = window
         self.pct = pct
         self.margin = margin_s

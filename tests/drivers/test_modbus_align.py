@@ -22,6 +22,9 @@ CHANNELS = ChannelMap.from_config([{"name": "hoist1_a", "register": 0, "scale": 
 TICK = 0.01
 GRID0 = 0.0031
 """The consumer's ticks are at GRID0 + k * TICK."""
+M = PollAligner().margin
+"""The lead is a high percentile of the round trips plus this margin."""
+W = PollAligner().window
 
 
 class SimTime:
@@ -134,12 +137,12 @@ def test_answers_land_just_before_ticks_by_the_lead() -> None:
     drv.align_to_ticks(grid())
     run(drv, out, 100)
     after = out[5:]  # the first poll uses the initial lead (2 ms)
-    for r in after:  # lead = round trip + 0.3 ms margin: each answer 0.3 ms before a tick
-        assert before_tick(r.t_host) == pytest.approx(0.0003, abs=1e-9)
+    for r in after:  # lead = round trip + margin: each answer the margin before a tick
+        assert before_tick(r.t_host) == pytest.approx(M, abs=1e-9)
     gaps = {round(b.t_host - a.t_host, 9) for a, b in zip(after, after[1:], strict=False)}
     assert gaps == {0.02}  # every other tick, at the poll rate
     a = drv.health.extra["align"]
-    assert a["state"] == "aligned" and a["lead_ms"] == pytest.approx(1.1)
+    assert a["state"] == "aligned" and a["lead_ms"] == pytest.approx(1e3 * (0.0008 + M))
     assert drv.aligner.late == 0
 
 
@@ -149,12 +152,12 @@ def test_jittery_round_trips_land_before_their_ticks_but_a_percent() -> None:
     drv.align_to_ticks(grid())
     run(drv, out, 2000)
     lead = drv.aligner.lead_for(TICK)
-    assert 0.0016 < lead < 0.0016 + 0.0003 + 1e-9
+    assert 0.0016 < lead < 0.0016 + M + 1e-9
     landed = [before_tick(r.t_host) for r in out[60:]]
     early = [x for x in landed if x < TICK / 2]  # the rest came just after a tick
     assert len(landed) - len(early) <= 0.01 * len(landed)
     # never earlier than the largest lead (slowest answer + margin) - the fastest answer
-    assert max(early) <= 0.0016 + 0.0003 - 0.0004 + 1e-9
+    assert max(early) <= 0.0016 + M - 0.0004 + 1e-9
     assert drv.aligner.late == len(landed) - len(early) + sum(
         1 for r in out[:60] if before_tick(r.t_host) > TICK / 2)
 
@@ -164,18 +167,18 @@ def test_lead_follows_the_round_trip_up_to_half_a_tick() -> None:
     drv, _clock, _client, out = make(lambda: rtt[0])
     drv.align_to_ticks(grid())
     run(drv, out, 400)
-    assert drv.aligner.lead_for(TICK) == pytest.approx(0.0008)
+    assert drv.aligner.lead_for(TICK) == pytest.approx(0.0005 + M)
     rtt[0] = 0.002  # slower: late until the lead has caught up, then on time again
     run(drv, out, 400)
-    assert drv.aligner.lead_for(TICK) == pytest.approx(0.0023)
+    assert drv.aligner.lead_for(TICK) == pytest.approx(0.002 + M)
     late = drv.aligner.late
-    assert 0 < late <= 50
+    assert 0 < late <= drv.aligner.update_every
     run(drv, out, 400)
     assert drv.aligner.late == late
-    assert all(before_tick(r.t_host) == pytest.approx(0.0003) for r in out[-400:])
+    assert all(before_tick(r.t_host) == pytest.approx(M) for r in out[-400:])
     rtt[0] = 0.0003  # faster again: the lead comes down once the slow ones leave the window
-    run(drv, out, 400)
-    assert drv.aligner.lead_for(TICK) == pytest.approx(0.0006)
+    run(drv, out, W)
+    assert drv.aligner.lead_for(TICK) == pytest.approx(0.0003 + M)
     rtt[0] = 0.008  # slower than half a tick: the lead stops at 5 ms, answers 3 ms late
     run(drv, out, 400)
     assert drv.aligner.lead_for(TICK) == pytest.approx(0.005)
@@ -194,7 +197,7 @@ def test_timeouts_are_not_round_trips() -> None:
     drv, _clock, _client, out = make(rtt)
     drv.align_to_ticks(grid())
     run(drv, out, 500)
-    assert drv.aligner.lead_for(TICK) == pytest.approx(0.001)
+    assert drv.aligner.lead_for(TICK) == pytest.approx(0.0007 + M)
     assert drv.aligner.late == 0  # a poll that timed out is not a late answer
     assert drv.health.timeouts >= 45
 
@@ -209,7 +212,7 @@ def test_polls_follow_a_moving_grid(slew: float) -> None:
     run(drv, out, 500)
     for r in out[10:]:
         x = before_tick(r.t_host, GRID0 + slew * r.t_host)
-        assert 0.0003 - 0.0001 - 1e-5 < x < 0.0003 + 0.0001 + 1e-5, x
+        assert M - 0.0001 - 1e-5 < x < M + 0.0001 + 1e-5, x
     assert clock.t > 9.0  # the grid moved by more than 4 ticks meanwhile
     assert drv.aligner.late == 0
 
@@ -220,7 +223,7 @@ def test_poll_rate_not_a_whole_number_of_ticks() -> None:
     drv.align_to_ticks(grid())
     run(drv, out, 301)
     for r in out[5:]:
-        assert before_tick(r.t_host) == pytest.approx(0.0003, abs=1e-9)
+        assert before_tick(r.t_host) == pytest.approx(M, abs=1e-9)
     assert (out[-1].t_host - out[0].t_host) == pytest.approx(10.0, abs=0.011)
     assert {round(b.t_host - a.t_host, 6) for a, b in zip(out[5:], out[6:], strict=False)} \
         <= {0.03, 0.04}
@@ -241,23 +244,23 @@ def test_after_a_stalled_answer_polls_do_not_burst() -> None:
 
     def rtt() -> float:
         n[0] += 1
-        return 0.045 if n[0] == 80 else 0.0008
+        return 0.045 if n[0] == 150 else 0.0008
 
     drv, _clock, client, out = make(rtt)
     drv.align_to_ticks(grid())
-    run(drv, out, 200)
+    run(drv, out, 300)
     gaps = [b - a for a, b in zip(client.starts, client.starts[1:], strict=False)]
-    assert gaps[79] > 0.045 and min(gaps[80:]) == pytest.approx(0.02)
-    # one slow answer among 300 does not move the lead (p99 of the recent round trips)
-    for r in out[5:79] + out[80:]:
-        assert before_tick(r.t_host) == pytest.approx(0.0003, abs=1e-9)
+    assert gaps[149] > 0.045 and min(gaps[150:]) == pytest.approx(0.02)
+    # one slow answer does not move the lead (a high percentile of the recent round trips)
+    for r in out[5:149] + out[150:]:
+        assert before_tick(r.t_host) == pytest.approx(M, abs=1e-9)
     assert drv.aligner.late == 1
 
 
 def test_aligner_percentile_ignores_rare_outliers() -> None:
-    al = PollAligner(window=300, update_every=50)
-    for i in range(300):
-        al.record(0.010 if i % 150 == 7 else 0.001, 0.0, 1.0)
-    assert al.lead_for(1.0) == pytest.approx(0.0013)
+    al = PollAligner()
+    for i in range(al.window):
+        al.record(0.010 if i % 400 == 7 else 0.001, 0.0, 1.0)  # 3 stalls in 1000
+    assert al.lead_for(1.0) == pytest.approx(0.001 + M)
     d: dict[str, Any] = al.as_dict("aligned")
-    assert d["rtt_ms"]["p50"] == pytest.approx(1.0) and d["polls"] == 300
+    assert d["rtt_ms"]["p50"] == pytest.approx(1.0) and d["polls"] == al.window
