@@ -325,7 +325,7 @@ class _Layout:
     so decoding is two C-level ``unpack_from`` calls plus a short loop per message.
     """
 
-    __slots__ = ("heads", "expect", "data", "slots")
+    __slots__ = ("heads", "expect", "data", "slots", "values_plan")
 
     def __init__(self, payload: bytes | memoryview) -> None:
         packets = list(iter_packets(payload))
@@ -354,6 +354,14 @@ class _Layout:
         self.heads = struct.Struct("".join(head_fmt))
         self.expect = tuple(expect)
         self.data = struct.Struct("".join(data_fmt))
+        self.values_plan = tuple((xdi & TYPE_MASK, _FAST_CONV.get(conv, _CONVERT), conv, a, b)
+                                 for xdi, _n, conv, _p, _f, a, b in self.slots
+                                 if conv != "bytes")
+        """:func:`mtdata2_values`' steps: (key, how, conversion, first, end) per packet."""
+
+
+_SLICE, _ONE, _CONVERT = 0, 1, 2
+_FAST_CONV = {"float": _SLICE, "int": _ONE}
 
 
 _layouts: dict[int, list[_Layout]] = {}
@@ -387,13 +395,13 @@ def mtdata2_values(payload: bytes | memoryview) -> dict[int, Any]:
     lay = _layout(payload)
     vals = lay.data.unpack_from(payload)
     out: dict[int, Any] = {}
-    for xdi, _name, conv, _prec, _frame, a, b in lay.slots:
-        if conv == "float":
-            out[xdi & TYPE_MASK] = vals[a:b]
-        elif conv == "int":
-            out[xdi & TYPE_MASK] = vals[a]
-        elif conv != "bytes":
-            out[xdi & TYPE_MASK] = _convert(conv, vals, a, b)
+    for key, how, conv, a, b in lay.values_plan:  # planned once per layout
+        if how == _SLICE:
+            out[key] = vals[a:b]
+        elif how == _ONE:
+            out[key] = vals[a]
+        else:
+            out[key] = _convert(conv, vals, a, b)
     return out
 
 

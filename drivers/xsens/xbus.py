@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import struct
 from typing import NamedTuple
+from zlib import adler32 as _adler32
 
 from drivers.sniffer import BAD_FRAME, NEED_MORE, NOT_A_FRAME, PacketSniffer
 
@@ -93,6 +94,9 @@ class XbusMessage(NamedTuple):
     data: bytes
 
 
+_new_tuple = tuple.__new__
+
+
 def encode_frame(mid: int, data: bytes = b"", bid: int = BID_MASTER,
                  extended: bool | None = None) -> bytes:
     """Build a complete Xbus frame; the extended length form is used for >= 255 data bytes
@@ -161,15 +165,19 @@ class XbusParser:
             total = ln + 5
         if n - i < total:
             return NEED_MORE
-        if sum(buf[i + 1:i + total]) & 0xFF:
+        if total <= 257:  # <= 256 bytes summed: adler32's low half is exactly 1 + their sum
+            if (_adler32(buf[i + 1:i + total]) - 1) & 0xFF:  # (C speed; sum() is 3x slower)
+                return BAD_FRAME
+        elif sum(buf[i + 1:i + total]) & 0xFF:
             return BAD_FRAME
         return total
 
     @staticmethod
     def _make(buf: bytearray, i: int, n: int) -> XbusMessage:
+        # tuple.__new__ directly: the NamedTuple's generated __new__ is a Python call
         if buf[i + 3] == EXTENDED_LENGTH:
-            return XbusMessage(buf[i + 2], bytes(buf[i + 6:i + n - 1]))
-        return XbusMessage(buf[i + 2], bytes(buf[i + 4:i + n - 1]))
+            return _new_tuple(XbusMessage, (buf[i + 2], bytes(buf[i + 6:i + n - 1])))
+        return _new_tuple(XbusMessage, (buf[i + 2], bytes(buf[i + 4:i + n - 1])))
 
     def feed(self, data: bytes | bytearray | memoryview) -> list[XbusMessage]:
         """Add received bytes; return the complete checked messages, in order."""
