@@ -378,6 +378,12 @@ class Ar4000Driver(Driver):
             self.health.last_error = f"babbling: {bad} of the last {n} lines malformed"
         self.health.extra["babbling"] = babbling
 
+    def idle(self, now: float) -> bool:
+        """True if :meth:`read` at ``now`` with nothing received would change nothing (no
+        reading queued by ``open``, not silent for ``silent_timeout_s``: the same test as
+        ``read``'s), so a replay that steps the driver itself can skip the call."""
+        return not self._pending and not now - self._last_good > self.config.silent_timeout_s
+
     def read(self, sink: Sink) -> None:
         ser = self._ser
         if ser is None:

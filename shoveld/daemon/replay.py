@@ -113,7 +113,7 @@ def fast_replay_service(capture_dir: str | Path, cfg: DaemonConfig, params: Mode
                   driver_clock=sync.clock, drivers=sync.drivers, driver_threads=False,
                   before_tick=sync.step, record_stats=record_stats,
                   close_truck_at_end=close_truck_at_end)
-    sync.attach({n: svc.store.sink(n) for n in devices})
+    sync.attach({n: svc.store.sink(n, threaded=False) for n in devices})  # one thread
     return ReplayRun(svc, sync, None)
 
 

@@ -39,8 +39,10 @@ class ReadingStore:
     def devices(self) -> list[str]:
         return list(self._recent)
 
-    def sink(self, device: str) -> Callable[[Reading], None]:
-        """The callback a driver thread hands its readings to."""
+    def sink(self, device: str, threaded: bool = True) -> Callable[[Reading], None]:
+        """The callback a driver thread hands its readings to. ``threaded=False`` for a
+        store that only one thread uses (fast replay steps the drivers in the loop's
+        thread): the same bookkeeping without the lock."""
         recent = self._recent[device]  # KeyError for an unknown device
         count, lock, monotonic = self._count, self._lock, time.monotonic
 
@@ -50,7 +52,12 @@ class ReadingStore:
                 n = count[device] + 1
                 count[device] = n
                 recent.append(Stored(r, arrived, n))
-        return put
+
+        def put_unlocked(r: Reading) -> None:
+            n = count[device] + 1
+            count[device] = n
+            recent.append(Stored(r, monotonic(), n))
+        return put if threaded else put_unlocked
 
     def put(self, device: str, r: Reading) -> None:
         arrived = time.monotonic()
