@@ -101,9 +101,11 @@ class Driver(ABC):
     def close(self) -> None:
         """Release the transport; must be safe to call twice."""
 
-    def align_to_ticks(self, hint: TickHint | None) -> bool:
+    def align_to_ticks(self, hint: TickHint | None, slot: int = 0) -> bool:
         """Time polls by ``hint`` (None: the driver's own schedule again); True if this
-        driver can. Streaming devices send on their own clock, so by default it cannot."""
+        driver can. ``slot`` picks among the ticks a poll period apart, so that several
+        polled devices need not all answer before the same tick. Streaming devices send
+        on their own clock, so by default a driver cannot."""
         return False
 
     def emit(self, sink: Sink, reading: Reading) -> None:

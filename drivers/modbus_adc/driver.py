@@ -313,12 +313,15 @@ class ModbusAdcDriver(Driver):
         self._target: float | None = None
         """The tick the current poll is timed for (aligned polls)."""
         self._align_state = "off"
+        self._slot = 0
 
-    def align_to_ticks(self, hint: TickHint | None) -> bool:
+    def align_to_ticks(self, hint: TickHint | None, slot: int = 0) -> bool:
         """Start each poll so its answer lands just before a tick of ``hint``'s grid (a
-        tick that is a poll period after the previous one), instead of on the driver's
-        own schedule; None restores that schedule."""
+        tick that is a poll period after the previous one, ticks ``k`` with ``k % n ==
+        slot % n`` when a poll period is ``n`` ticks), instead of on the driver's own
+        schedule; None restores that schedule."""
         self.tick_hint = hint
+        self._slot = slot
         self._target = None
         self._align_state = "off" if hint is None else "waiting"
         if hint is None:
@@ -469,17 +472,24 @@ class ModbusAdcDriver(Driver):
         al = self.aligner
         lead = al.lead_for(tick_period)
         now = clock()
-        ticks = (period / tick_period)
-        whole = abs(ticks - round(ticks)) < 1e-6
+        ticks = period / tick_period
+        n = round(ticks)
+        whole = abs(ticks - n) < 1e-6
         if self._next_poll is None:  # where the next answer is wanted
             self._next_poll = now + lead
-        # the grid tick nearest to the wanted time (the first one we can still make at start)
-        k = round((self._next_poll - tick) / tick_period) if self._target is not None else \
-            math.ceil((self._next_poll - tick) / tick_period - 1e-9)
+        if self._target is not None:  # the grid tick nearest to the wanted time
+            k = round((self._next_poll - tick) / tick_period)
+        else:  # the first one we can still make, in our slot
+            k = math.ceil((self._next_poll - tick) / tick_period - 1e-9)
+            if whole:
+                k += (self._slot - k) % n
         target = tick + k * tick_period
         start = target - lead
         if now > target:  # missed it (slow answer, late thread): the next tick we can make
-            target = tick + math.ceil((now + lead - tick) / tick_period - 1e-9) * tick_period
+            k = math.ceil((now + lead - tick) / tick_period - 1e-9)
+            if whole:
+                k += (self._slot - k) % n
+            target = tick + k * tick_period
             self._next_poll = target
             self._target = target
             return

@@ -157,14 +157,19 @@ class Service:
                          delay_s=lc.sync_delay_s, lost_after_s=dev.max_age_s)
 
     def _align_polls(self) -> list[str]:
-        """``[loop] align_polls``: host-polled drivers time their polls by the loop's grid.
-        Live clocks only, like the phase lock: on a simulated clock the drivers' schedule
-        must stay the capture's for replays to be deterministic."""
+        """``[loop] align_polls``: host-polled drivers time their polls by the loop's grid,
+        each in its own slot (consecutive ticks) so their answers do not compete for the
+        same moment. Live clocks only, like the phase lock: on a simulated clock the
+        drivers' schedule must stay the capture's for replays to be deterministic."""
         if not self.cfg.loop.align_polls or self.clock.simulated:
             return []
         hint = self.loop.tick_hint  # the loop clock is the drivers' time base live
-        return [name for name, drv in self.drivers.items()
-                if getattr(drv, "align_to_ticks", None) is not None and drv.align_to_ticks(hint)]
+        out: list[str] = []
+        for name, drv in self.drivers.items():
+            if getattr(drv, "align_to_ticks", None) is not None and \
+                    drv.align_to_ticks(hint, slot=len(out)):
+                out.append(name)
+        return out
 
     @property
     def live_msg(self) -> dict[str, Any] | None:

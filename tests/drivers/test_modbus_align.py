@@ -264,3 +264,15 @@ def test_aligner_percentile_ignores_rare_outliers() -> None:
     assert al.lead_for(1.0) == pytest.approx(0.001 + M)
     d: dict[str, Any] = al.as_dict("aligned")
     assert d["rtt_ms"]["p50"] == pytest.approx(1.0) and d["polls"] == al.window
+
+
+def test_slots_put_two_modules_on_different_ticks() -> None:
+    """Two 50 Hz modules against 100 Hz ticks: slot 0 answers before the even ticks of
+    the hinted grid, slot 1 before the odd ones, so they do not compete for one tick."""
+    ticks: dict[int, set[int]] = {}
+    for slot in (0, 1):
+        drv, _clock, _client, out = make(lambda: 0.0008, t0=0.0123)
+        drv.align_to_ticks(grid(), slot=slot)
+        run(drv, out, 50)
+        ticks[slot] = {round((r.t_host + M - GRID0) / TICK) % 2 for r in out[5:]}
+    assert ticks == {0: {0}, 1: {1}}
