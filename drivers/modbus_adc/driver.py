@@ -510,10 +510,10 @@ class ModbusAdcDriver(Driver):
         if al.polls % 50 == 0 or reading.t_host > target:
             self.health.extra["align"] = al.as_dict("aligned")
         if self._failed_polls >= self.config.reconnect_after:
-            n = self._failed_polls
+            failed = self._failed_polls
             self._failed_polls = 0
             raise DeviceError(f"Modbus module at {self.config.endpoint} answered none of the "
-                              f"last {n} polls")
+                              f"last {failed} polls")
 
     def _read_free(self, sink: Sink) -> None:
         """One poll on the driver's own schedule (``poll_hz`` from the first poll)."""
