@@ -13,11 +13,25 @@ import logging
 import threading
 import time
 from abc import ABC, abstractmethod
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 log = logging.getLogger(__name__)
+
+
+def check_keys(where: str, table: Mapping[str, Any], known: Iterable[str],
+               required: Mapping[str, str] | None = None) -> None:
+    """Refuse a config table with an unknown or a missing key, naming the key: a typo
+    must never fall back silently to a default. ``required`` maps each required key to
+    what it should hold, for the message."""
+    allowed = sorted(set(known))
+    for k in table:
+        if k not in allowed:
+            raise ValueError(f"{where}: unknown key {k!r}; known keys: {allowed}")
+    for k, what in (required or {}).items():
+        if k not in table:
+            raise ValueError(f"{where}: key {k!r} is required ({what})")
 
 
 @dataclass(slots=True)

@@ -49,7 +49,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, fields
 from typing import Any
 
-from drivers.base import DeviceError, Driver, Reading, Sink
+from drivers.base import DeviceError, Driver, Reading, Sink, check_keys
 from drivers.capture.clock import clock_wait_until
 from drivers.capture.tap import ByteTap, SerialFactory, open_serial
 from drivers.serialio import direct_reader
@@ -154,11 +154,7 @@ class Ar4000Config:
         """Build from a config table; ``ValueError`` names the offending key."""
         known = {f.name: f for f in fields(cls)}
         ignored = {"kind", "name"}
-        for k in d:
-            if k not in known and k not in ignored:
-                raise ValueError(f"ar4000: unknown key {k!r}; known keys: {sorted(known)}")
-        if "port" not in d:
-            raise ValueError("ar4000: key 'port' is required (serial device path)")
+        check_keys("ar4000", d, [*known, *ignored], {"port": "serial device path"})
         kw: dict[str, Any] = {}
         for k, v in d.items():
             if k in ignored:

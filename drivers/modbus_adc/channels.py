@@ -22,6 +22,8 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from drivers.base import check_keys
+
 #: Signals-table columns an ADC channel may feed.
 ADC_COLUMNS: tuple[str, ...] = (
     "hoist1_a", "hoist2_a", "hoist_field_a", "crowd_a", "crowd_field_a", "swing_a",
@@ -134,9 +136,7 @@ class ChannelMap:
             p = f"{prefix}[{i}]"
             if not isinstance(d, Mapping):
                 raise ValueError(f"{p} must be a table")
-            for k in d:
-                if k not in _CHANNEL_KEYS:
-                    raise ValueError(f"{p}: unknown key {k!r}; known keys: {list(_CHANNEL_KEYS)}")
+            check_keys(p, d, _CHANNEL_KEYS)
             name = d.get("name")
             if not isinstance(name, str) or name not in ADC_COLUMNS:
                 raise ValueError(f"{p}.name must be one of {list(ADC_COLUMNS)}, got {name!r}")

@@ -37,7 +37,7 @@ from pymodbus.client import ModbusSerialClient, ModbusTcpClient
 from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
 from pymodbus.framer import FramerType
 
-from drivers.base import DeviceError, Driver, Reading, Sink, TickHint
+from drivers.base import DeviceError, Driver, Reading, Sink, TickHint, check_keys
 from drivers.capture.clock import clock_wait_until
 from drivers.capture.format import RegisterRead
 from drivers.modbus_adc.channels import Channel, ChannelMap
@@ -109,11 +109,7 @@ class ModbusAdcConfig:
                              f"got {kind!r}")
         tcp = kind == "modbus_tcp"
         allowed = _COMMON_KEYS | (_TCP_KEYS if tcp else _RTU_KEYS)
-        for k in d:
-            if k not in allowed:
-                raise ValueError(f"{kind}: unknown key {k!r}; known keys: {sorted(allowed)}")
-        if "channels" not in d:
-            raise ValueError(f"{kind}: key 'channels' is required (list of channel tables)")
+        check_keys(kind, d, allowed, {"channels": "list of channel tables"})
         chans = ChannelMap.from_config(d["channels"], prefix=f"{kind}: channels")
         kw: dict[str, Any] = {"transport": "tcp" if tcp else "rtu", "channels": chans}
 

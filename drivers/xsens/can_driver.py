@@ -44,7 +44,7 @@ from typing import Any
 
 import can
 
-from drivers.base import DeviceError, Driver, Reading, Sink
+from drivers.base import DeviceError, Driver, Reading, Sink, check_keys
 from drivers.xsens.orientation import quat_to_euler_deg
 
 log = logging.getLogger(__name__)
@@ -213,10 +213,7 @@ class MtiCanDriver(Driver):
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any], **kwargs: Any) -> MtiCanDriver:
         """Build from a config mapping (ids may be ints or hex strings such as "0x022")."""
-        unknown = sorted(set(cfg) - set(cls.CONFIG_KEYS))
-        if unknown:
-            raise ValueError(f"mti_can config: unknown key '{unknown[0]}' (known: "
-                             f"{', '.join(cls.CONFIG_KEYS)})")
+        check_keys("mti_can config", cfg, cls.CONFIG_KEYS)
         args = dict(cfg)
         layout_args: dict[str, Any] = {}
         for f in fields(MtiCanLayout):

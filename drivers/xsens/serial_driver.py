@@ -38,7 +38,7 @@ from typing import Any
 
 import serial
 
-from drivers.base import DeviceError, Driver, Reading, Sink
+from drivers.base import DeviceError, Driver, Reading, Sink, check_keys
 from drivers.serialio import direct_reader
 from drivers.xsens.mtdata2 import (
     FRAME_BY_NAME,
@@ -135,12 +135,7 @@ class MtiSerialDriver(Driver):
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any], **kwargs: Any) -> MtiSerialDriver:
         """Build from a config mapping; ValueError names the first bad or unknown key."""
-        unknown = sorted(set(cfg) - set(cls.CONFIG_KEYS))
-        if unknown:
-            raise ValueError(f"mti config: unknown key '{unknown[0]}' (known: "
-                             f"{', '.join(cls.CONFIG_KEYS)})")
-        if "port" not in cfg:
-            raise ValueError("mti config: missing key 'port' (serial device path)")
+        check_keys("mti config", cfg, cls.CONFIG_KEYS, {"port": "serial device path"})
         args = dict(cfg)
         if "backoff_s" in args:
             b = args["backoff_s"]
