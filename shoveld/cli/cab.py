@@ -1,8 +1,11 @@
 """``shoveld cab``: the operator's view in a terminal, from Zenoh.
 
-Subscribes to a shovel's ``payload/live``, ``pass``, ``truck`` and ``health`` topics,
-asks ``status`` once at start (so a display switched on mid-truck shows the passes
-already loaded), and watches the daemon's liveliness token. On a terminal it redraws
+Subscribes to a shovel's ``payload/live``, ``pass``, ``truck`` and ``health`` topics
+and watches the daemon's liveliness token. Whenever that token appears - at start, after
+the daemon restarts, after the network or a router comes back - it asks ``status``, so
+a display switched on mid-truck, or cut off while passes were made, shows every pass of
+the current truck (Zenoh does not re-send what was published while it was away; the
+daemon's pass log has it). On a terminal it redraws
 one screen with plain ANSI codes; when stdout is not a terminal (a log, a pipe) it
 prints one line per event instead.
 """
@@ -122,12 +125,23 @@ class CabState:
                 v.problems = probs
 
     def on_status(self, shovel: str, st: dict[str, Any]) -> None:
+        """The daemon's answer to ``status``: its current truck and the passes in it. A
+        pass of that truck heard after the daemon answered is kept."""
         with self.lock:
             v = self.view(shovel)
             v.alive = True
-            if st.get("truck"):
-                v.truck = st["truck"]
-            v.passes = list(st.get("truck_passes") or [])
+            truck = st.get("truck")
+            if truck:
+                newer = (v.truck is not None and v.truck.get("truck") == truck.get("truck")
+                         and (v.truck.get("passes") or 0) > (truck.get("passes") or 0))
+                if not newer:
+                    v.truck = truck
+            passes = {p.get("pass"): p for p in st.get("truck_passes") or []}
+            number = (truck or {}).get("truck")
+            for p in v.passes:
+                if p.get("truck") == number and p.get("pass") not in passes:
+                    passes[p.get("pass")] = p
+            v.passes = sorted(passes.values(), key=lambda p: p.get("pass") or 0)
             if st.get("live"):
                 v.live = st["live"]
             v.problems = list(st.get("problems") or [])
@@ -224,14 +238,24 @@ class CabClient:
 
         def on_alive(sample: Any) -> None:
             key = str(sample.key_expr).split("/")
-            state.on_alive(key[n], sample.kind == zenoh.SampleKind.PUT)
+            alive = sample.kind == zenoh.SampleKind.PUT
+            state.on_alive(key[n], alive)
+            if alive:  # (re)appeared: catch up on what was missed, off Zenoh's callback thread
+                threading.Thread(target=self.query_status, args=(2.0, key[n]),
+                                 name="cab-status", daemon=True).start()
 
         self._subs.append(self.session.liveliness().declare_subscriber(
             f"{base}/alive", on_alive, history=True))
 
-    def query_status(self, timeout: float = 2.0) -> int:
+    def query_status(self, timeout: float = 2.0, shovel: str | None = None) -> int:
+        """Ask ``status`` of one shovel (default: the ones shown); returns the answers."""
         n = 0
-        for reply in self.session.get(f"{self.prefix}/{self.shovel}/status", timeout=timeout):
+        key = f"{self.prefix}/{shovel or self.shovel}/status"
+        try:
+            replies = self.session.get(key, timeout=timeout)
+        except Exception:  # noqa: BLE001 - session closed while a catch-up query was due
+            return 0
+        for reply in replies:
             if reply.ok is None:
                 continue
             key = str(reply.ok.key_expr).split("/")
@@ -293,7 +317,6 @@ def run(args: argparse.Namespace) -> int:
                        f"{e}") from None
     stop = threading.Event()
     try:
-        client.query_status()
         show(state, sys.stdout, sys.stdout.isatty() and not args.lines, stop, args.duration,
              args.until_closed_trucks)
     except KeyboardInterrupt:

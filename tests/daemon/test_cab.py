@@ -86,3 +86,19 @@ def test_cab_cli_on_zenoh(tmp_path: Path, e2e_table: SignalsTable, params: Model
     assert "t1 pass 1 truck 1:" in out and "t1 pass 3 truck 2:" in out
     assert "t1 truck 1 CLOSED: 2 passes" in out and "t1 truck 2 CLOSED: 1 passes" in out
     assert " lift " in out and " swing " in out  # live payload lines at phase changes
+
+
+def test_a_late_status_answer_keeps_newer_passes_of_its_truck() -> None:
+    """The catch-up ``status`` answer may be older than a pass heard meanwhile."""
+    state = CabState()
+    fill(state)  # truck 4: pass 11 from status, pass 12 heard, truck message with 2 passes
+    state.on_status("s7", {"truck": {"truck": 4, "passes": 1, "total_kg": 30000.0},
+                           "truck_passes": [{"pass": 11, "truck": 4, "payload_kg": 30000.0,
+                                             "std_kg": 250.0, "valid": True}]})
+    v = state.shovels["s7"]
+    assert [p["pass"] for p in v.passes] == [11, 12]
+    assert v.truck is not None and v.truck["passes"] == 2  # the newer truck message stays
+    # a status of the next truck replaces the old truck's passes
+    state.on_status("s7", {"truck": {"truck": 5, "passes": 0, "total_kg": 0.0},
+                           "truck_passes": []})
+    assert v.passes == [] and v.truck["truck"] == 5

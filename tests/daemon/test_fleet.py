@@ -106,3 +106,49 @@ def _wait(pred: Any, timeout: float) -> bool:
             return True
         time.sleep(0.05)
     return pred()
+
+
+def test_cab_catches_up_on_passes_made_while_the_router_was_down(
+        tmp_path: Path, e2e_table: SignalsTable, params: ModelParams) -> None:
+    """Zenoh does not re-send what was published while a link was down; the cab asks
+    ``status`` when the daemon's liveliness token comes back, so it still shows every
+    pass of the open truck."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+
+    def start_router() -> subprocess.Popen[str]:
+        r = subprocess.Popen([sys.executable, "-c", ROUTER, endpoint], stdin=subprocess.PIPE,
+                             stdout=subprocess.PIPE, text=True)
+        assert r.stdout is not None and r.stdout.readline().strip() == "up"
+        return r
+
+    router = start_router()
+    cab = CabState()
+    client: CabClient | None = None
+    svc = None
+    try:
+        cfg = make_cfg(tmp_path, shovel={"id": "s1"},
+                       zenoh={"mode": "client", "listen": [], "connect": [endpoint]})
+        svc, feed = table_service(e2e_table, cfg, params)  # the last truck stays open
+        svc.start(zenoh_wait_s=5.0)
+        client = CabClient(cab, [endpoint], "client", "s1")
+        assert _wait(lambda: "s1" in cab.shovels and cab.shovels["s1"].alive, 5.0)
+        router.communicate("", timeout=10)  # the router goes away
+        assert _wait(lambda: cab.shovels["s1"].alive is False, 10.0)
+        svc.run(threading.Event(), done=lambda: feed.finished)  # all passes, heard by nobody
+        svc.flush()
+        assert [p["pass"] for p in svc.status()["truck_passes"]] == [3]
+        assert cab.shovels["s1"].passes == []  # nothing reached the cab
+        router = start_router()
+        # both sessions reconnect; the token reappears and the cab asks status
+        assert _wait(lambda: [p["pass"] for p in cab.shovels["s1"].passes] == [3], 30.0), \
+            cab.shovels["s1"]
+        view = cab.shovels["s1"]
+        assert view.alive and view.truck is not None
+        assert view.truck["truck"] == 2 and view.truck["passes"] == 1
+        assert view.passes[0]["payload_kg"] == svc.status()["truck_passes"][0]["payload_kg"]
+    finally:
+        if client is not None:
+            client.close()
+        if svc is not None:
+            svc.close()
+        router.communicate("", timeout=10)
