@@ -124,6 +124,9 @@ class Engine:
         self.noise = (params.noise["handle"], params.noise["crowd"])
         self.rls: PayloadRls | None = None
         self.pass_index = first_pass - 1
+        self._cycle = 0
+        """Dig cycles started: tags the lagged samples so none crosses into another cycle
+        (a pass number can be reused after an abandoned cycle; this count never is)."""
         self.pass_start = math.nan
         self.dig_end = math.nan
         self.invalid_updates = 0
@@ -164,13 +167,13 @@ class Engine:
         settled = ph in ESTIMATING and t - self.dig_end >= self.cfg.settle_s
         lag = self.lagged
         tag = lag.push_tag(t, (z_th, z_d, 0.0 if z_sw != z_sw else z_sw),
-                           (s, settled, self.pass_index))
+                           (s, settled, self._cycle))
         if self.cfg.payload_rates == "kalman":
             if settled and self.rls is not None:
                 valid = self._update(s, th, d, sw, thd, dd, swd, thdd, ddd, swdd)
         elif tag is not None:
-            s_lag, settled_lag, pass_lag = tag
-            if settled_lag and pass_lag == self.pass_index and self.rls is not None:
+            s_lag, settled_lag, cycle_lag = tag
+            if settled_lag and cycle_lag == self._cycle and self.rls is not None:
                 kin = lag.derivatives()  # the fit only where it is used
                 valid = self._update(s_lag, *kin[0], *kin[1], *kin[2])
         elif ph in ESTIMATING:
@@ -209,6 +212,7 @@ class Engine:
             if t - self.last_dump_t > self.cfg.truck_gap_s:
                 out.extend(self.new_truck())
             self.pass_index += 1
+            self._cycle += 1
             self.pass_start = t
             self.rls = PayloadRls(self.noise, self.dt, self.cfg.rls)
             self._cached = (-1, math.nan, math.nan)
@@ -220,7 +224,10 @@ class Engine:
             self._flush()
             out.extend(self._finish_pass(t))
         if ph == IDLE and prev != IDLE and self.rls is not None and prev in ESTIMATING:
-            self.rls = None  # the cycle was abandoned before a dump
+            # the cycle was abandoned before a dump: no pass, and its number goes to the
+            # next cycle, so the operator's pass numbers have no gaps
+            self.rls = None
+            self.pass_index -= 1
         return out
 
     def _finish_pass(self, t: float) -> list[Event]:

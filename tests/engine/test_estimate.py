@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -108,3 +109,40 @@ def test_every_subcommand_has_help(capsys: pytest.CaptureFixture[str]) -> None:
         with pytest.raises(SystemExit) as ei:
             main([name, "--help"])
         assert ei.value.code == 0
+
+
+def test_an_abandoned_cycle_leaves_no_gap_in_pass_numbers(params: ModelParams,
+                                                          cycles: SimResult) -> None:
+    """A dig that lifts and then stops (no dump) makes no pass and uses no pass number."""
+    from shoveld.cycle.phases import PhaseConfig
+    from shoveld.engine.loop import Engine, EngineConfig, LiveEstimate, PassResult
+    from shoveld.sample import Sample, samples_from_table
+
+    real = list(samples_from_table(cycles.table))
+    dt = real[1].time_s - real[0].time_s
+    s0 = real[0]
+    hold = PhaseConfig().idle_hold_s
+    # handle angle of the abandoned cycle: still in the tuck, a dig rising out of it, a
+    # stop above the bank for longer than idle_hold_s, then back to where the data starts
+    knots = [(0.0, -40.0), (3.0, -40.0), (11.0, 0.0), (13.0 + hold, 0.0),
+             (21.0 + hold, s0.handle_deg), (23.0 + hold, s0.handle_deg)]
+    n = int(knots[-1][0] / dt)
+    ts = np.arange(n) * dt
+    th = np.interp(ts, [k[0] for k in knots], [k[1] for k in knots])
+    pre = [Sample(float(t), handle_deg=float(a), crowd_m=s0.crowd_m, swing_deg=s0.swing_deg,
+                  boom_deg=s0.boom_deg) for t, a in zip(ts, th, strict=True)]
+    shift = n * dt - s0.time_s
+    data = pre + [dataclasses.replace(s, time_s=s.time_s + shift) for s in real]
+    eng = Engine(params, EngineConfig(rate_hz=1.0 / dt))
+    phases: list[str] = []
+    passes: list[PassResult] = []
+    for s in data:
+        for ev in eng.step(s):
+            if isinstance(ev, LiveEstimate) and (not phases or phases[-1] != ev.phase):
+                phases.append(ev.phase)
+            elif isinstance(ev, PassResult):
+                passes.append(ev)
+    # the cycle was really abandoned: dig, lift, then idle before any dump
+    assert phases[:4] == ["idle", "dig", "lift", "idle"], phases[:6]
+    assert [p.index for p in passes] == list(range(1, len(cycles.passes) + 1))
+    assert all(p.valid for p in passes)
