@@ -32,6 +32,15 @@ class Clock(Protocol):
         """True when time does not pass by itself (jitter means nothing then)."""
 
 
+def boot_id() -> str | None:
+    """This boot's id (Linux): monotonic times compare only within one boot."""
+    try:
+        with open("/proc/sys/kernel/random/boot_id") as f:
+            return f.read().strip() or None
+    except OSError:
+        return None
+
+
 class MonotonicClock:
     """The live clock: ``time.monotonic``, sleeping for real."""
 
@@ -60,6 +69,20 @@ class MonotonicClock:
 
     def wall(self, t: float) -> float:
         return self._offset + t
+
+    def boot_stamp(self, t: float) -> str | None:
+        """``t`` as "<boot id> <seconds>": an NTP step cannot move it, so a restart within
+        the same boot measures the time since the last dump exactly (wall time after)."""
+        b = boot_id()
+        return None if b is None else f"{b} {t!r}"
+
+    def since_boot_stamp(self, stamp: str) -> float | None:
+        """Seconds from ``stamp`` to now, or None if it was taken in another boot."""
+        b, _, t = stamp.partition(" ")
+        try:
+            return time.monotonic() - float(t) if b and b == boot_id() else None
+        except ValueError:
+            return None
 
     def __call__(self) -> float:
         return time.monotonic()

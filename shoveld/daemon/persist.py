@@ -57,6 +57,8 @@ class Restored:
     truck: int = 1
     truck_passes: list[dict[str, Any]] = field(default_factory=list)
     last_dump_unix: float | None = None
+    last_dump_boot: str | None = None
+    """The last dump on the live clock, "<boot id> <monotonic s>" (see ``write_pass``)."""
 
 
 def db_path(state_dir: str | Path) -> Path:
@@ -125,11 +127,16 @@ class PassLog:
             r.truck = max_truck + 1
         end = c.execute("SELECT end_unix FROM passes ORDER BY pass DESC LIMIT 1").fetchone()
         r.last_dump_unix = end[0] if end else None
+        boot = c.execute("SELECT value FROM meta WHERE key = 'last_dump_boot'").fetchone()
+        r.last_dump_boot = boot[0] if boot and end else None
         return r
 
     def write_pass(self, p: dict[str, Any], start_unix: float, end_unix: float,
-                   target_kg: float) -> bool:
-        """Commit one finished pass (and open its truck); False if it was already there."""
+                   target_kg: float, boot_stamp: str | None = None) -> bool:
+        """Commit one finished pass (and open its truck); False if it was already there.
+
+        ``boot_stamp``: the dump on the live clock, kept in the same transaction so that a
+        restart measures the truck gap without trusting wall time (NTP may step it)."""
         c = self.con
         now = time.time()
         try:
@@ -142,6 +149,11 @@ class PassLog:
                       (p["pass"], p["truck"], self.shovel, start_unix, end_unix, p["start_s"],
                        p["end_s"], p["payload_kg"], p["std_kg"], p["samples"],
                        int(bool(p["valid"])), p.get("reason", ""), now))
+            if boot_stamp is not None:
+                c.execute("INSERT OR REPLACE INTO meta(key, value) VALUES ('last_dump_boot', ?)",
+                          (boot_stamp,))
+            else:
+                c.execute("DELETE FROM meta WHERE key = 'last_dump_boot'")
             c.execute("COMMIT")
         except sqlite3.IntegrityError:
             c.execute("ROLLBACK")

@@ -123,6 +123,9 @@ class Service:
         self._next_health = -math.inf
         self._pending_arrivals: list[tuple[str, float]] = []
         self._measure_latency = not self.clock.simulated
+        self._boot_stamp: Callable[[float], str | None] | None = getattr(
+            self.clock, "boot_stamp", None)
+        """Dumps stamped on the live clock for the truck gap after a restart (not NTP's)."""
         """Arrival -> publish needs host time; a simulated clock has none."""
         self._prev_overruns = 0
         self._prev_ticks = 0
@@ -219,8 +222,11 @@ class Service:
                              truck_passes=r.truck_passes)
         now = self.clock.now()
         if r.last_dump_unix is not None:
-            elapsed = max(0.0, self.clock.wall(now) - r.last_dump_unix)
-            self.engine.last_dump_t = now - elapsed
+            since = getattr(self.clock, "since_boot_stamp", None)  # the live clock has it
+            elapsed = since(r.last_dump_boot) if since and r.last_dump_boot else None
+            if elapsed is None:  # another boot, or not live: wall time is all there is
+                elapsed = self.clock.wall(now) - r.last_dump_unix
+            self.engine.last_dump_t = now - max(0.0, elapsed)
         self.truck_passes = [self._pass_msg_from_engine(p) for p in r.truck_passes]
         self.truck_msg = self._truck_msg(self.engine.truck.as_dict(), False)
         log.info("pass log %s: next pass %d, truck %d with %d passes", self.passlog.path,
@@ -363,7 +369,9 @@ class Service:
         if isinstance(ev, LiveEstimate):
             self._live = (ev, engine.pass_index, engine.truck.index)
         elif isinstance(ev, PassResult):
-            self._q.put(("pass", ev.as_dict(), wall(ev.start_s), wall(ev.end_s)))
+            stamp = self._boot_stamp
+            self._q.put(("pass", ev.as_dict(), wall(ev.start_s), wall(ev.end_s),
+                         stamp(ev.end_s) if stamp is not None else None))
         elif isinstance(ev, TruckResult):
             self._q.put(("truck", ev.truck.as_dict(), ev.closed, wall(t)))
             if ev.closed and engine.truck is not ev.truck:
@@ -395,10 +403,10 @@ class Service:
         assert self.passlog is not None
         target = self.cfg.engine.truck_target_kg
         if item[0] == "pass":
-            _, p, start_u, end_u = item
+            _, p, start_u, end_u, boot = item
             for attempt in range(5):
                 try:
-                    self.passlog.write_pass(p, start_u, end_u, target)
+                    self.passlog.write_pass(p, start_u, end_u, target, boot)
                     break
                 except Exception as e:  # noqa: BLE001 - disk full, I/O error: retry, then say so
                     self.persist_error = f"writing pass {p['pass']}: {e}"

@@ -109,3 +109,14 @@ def test_database_is_plain_sqlite(tmp_path: Path) -> None:
     con = sqlite3.connect(db_path(tmp_path))
     assert con.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
     assert con.execute("SELECT count(*) FROM passes").fetchone()[0] == 1
+
+
+def test_the_boot_stamp_goes_with_the_last_pass(tmp_path: Path) -> None:
+    """Written in the pass's transaction; a pass without one (a simulated clock) clears
+    it, so an old stamp is never taken for a newer dump."""
+    log = PassLog(db_path(tmp_path), "s1")
+    log.write_pass(p(1, 1), T0, T0 + 8, 62000.0, "boot-a 1234.5")
+    assert log.restore().last_dump_boot == "boot-a 1234.5"
+    log.write_pass(p(2, 1), T0 + 10, T0 + 18, 62000.0)
+    assert log.restore().last_dump_boot is None
+    assert log.restore().last_dump_unix == T0 + 18

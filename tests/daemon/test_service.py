@@ -168,3 +168,35 @@ def test_restart_restores_the_current_truck(tmp_path: Path, e2e_table: SignalsTa
             est.passes[0].payload_kg + est.passes[1].payload_kg, rel=0.015)
     finally:
         svc2.close()
+
+
+def test_restart_measures_the_truck_gap_on_the_boot_clock_not_wall_time(
+        tmp_path: Path, e2e_table: SignalsTable, params: ModelParams) -> None:
+    """NTP stepped the wall clock by two hours between the last dump and a restart: in the
+    same boot the monotonic stamp still says 5 s, so the open truck goes on; a stamp from
+    another boot falls back to wall time."""
+    from shoveld.daemon.clock import MonotonicClock, boot_id
+    from shoveld.daemon.persist import PassLog, db_path
+
+    if boot_id() is None:
+        pytest.skip("no /proc/sys/kernel/random/boot_id here")
+    cfg = make_cfg(tmp_path)
+    clock = MonotonicClock()
+
+    def one_pass(n: int, stamp: str) -> float:
+        dump_wall = time.time() - 7200.0  # what wall time says after the step
+        p = {"pass": n, "truck": 1, "start_s": 0.0, "end_s": 8.0, "payload_kg": 30000.0,
+             "std_kg": 200.0, "samples": 300, "valid": True, "reason": ""}
+        log = PassLog(db_path(cfg.state_dir), "t1")
+        log.write_pass(p, dump_wall - 8.0, dump_wall, 62000.0, stamp)
+        log.close()
+        svc, _ = table_service(e2e_table, cfg, params, clock=clock)
+        svc.start()
+        try:
+            assert svc.engine is not None
+            return clock.now() - svc.engine.last_dump_t
+        finally:
+            svc.close()
+
+    assert one_pass(1, clock.boot_stamp(clock.now() - 5.0) or "") == pytest.approx(5.0, abs=1.0)
+    assert one_pass(2, f"not-this-boot {clock.now() - 5.0!r}") == pytest.approx(7200.0, abs=5.0)
