@@ -396,8 +396,10 @@ class MtiEmulator:
                 self._set_outputs([tuple(s) for s in decode_output_configuration(msg.data)])
             self._send(MID.OUTPUT_CONFIGURATION, encode_output_configuration(self.outputs))
         elif mid == MID.GOTO_MEASUREMENT:
-            self._send(MID.GOTO_MEASUREMENT_ACK)
+            # in measurement before the ack goes out (the emulator's thread sends both, so
+            # no data packet can precede the ack), so whoever got the ack sees the new state
             self._enter_measurement()
+            self._send(MID.GOTO_MEASUREMENT_ACK)
         else:
             self._send(MID.ERROR, b"\x04")
 
