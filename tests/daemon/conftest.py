@@ -57,6 +57,16 @@ def make_cfg(tmp_path: Path, port: int | None = None, **sections: Any) -> Daemon
     return parse_config(doc, "<test>", require_devices=False)
 
 
+def wait_for(pred: Callable[[], bool], timeout: float, poll_s: float = 0.05) -> bool:
+    """Poll ``pred`` until it holds or ``timeout`` passes; its last value."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if pred():
+            return True
+        time.sleep(poll_s)
+    return pred()
+
+
 class Collector:
     """A Zenoh client session collecting JSON samples under a key expression."""
 
@@ -80,12 +90,7 @@ class Collector:
             return [m for k, m, _ in self.samples if k.endswith("/" + suffix)]
 
     def wait(self, pred: Callable[[], bool], timeout: float = 10.0) -> bool:
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            if pred():
-                return True
-            time.sleep(0.02)
-        return pred()
+        return wait_for(pred, timeout, poll_s=0.02)
 
     def close(self) -> None:
         self.sub.undeclare()

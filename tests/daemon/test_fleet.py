@@ -19,7 +19,7 @@ from shoveld.daemon.tablefeed import table_service
 from shoveld.model.params import ModelParams
 from shoveld.signals.table import SignalsTable
 
-from .conftest import Collector, free_port, make_cfg
+from .conftest import Collector, free_port, make_cfg, wait_for
 
 ROUTER = """
 import json, sys, time, zenoh
@@ -34,14 +34,20 @@ s.close()
 """
 
 
+def start_router(endpoint: str) -> subprocess.Popen[str]:
+    """The router process, once it listens on ``endpoint``; stop it with communicate("")."""
+    r = subprocess.Popen([sys.executable, "-c", ROUTER, endpoint], stdin=subprocess.PIPE,
+                         stdout=subprocess.PIPE, text=True)
+    assert r.stdout is not None and r.stdout.readline().strip() == "up"
+    return r
+
+
 def test_fleet_through_a_router(tmp_path: Path, e2e_table: SignalsTable,
                                 params: ModelParams) -> None:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    router = subprocess.Popen([sys.executable, "-c", ROUTER, endpoint], stdin=subprocess.PIPE,
-                              stdout=subprocess.PIPE, text=True)
+    router = start_router(endpoint)
     made: list[Any] = []
     try:
-        assert router.stdout is not None and router.stdout.readline().strip() == "up"
         services = []
         for sid in ("s1", "s2"):
             cfg = make_cfg(tmp_path / sid, shovel={"id": sid},
@@ -89,7 +95,7 @@ def test_fleet_through_a_router(tmp_path: Path, e2e_table: SignalsTable,
         assert alive == ["shovel/s1/alive", "shovel/s2/alive"]
         # a shovel that goes away is seen as gone by the cabs
         services[1][0].close()
-        assert _wait(lambda: cabs["s2-a"].shovels["s2"].alive is False, 5.0)
+        assert wait_for(lambda: cabs["s2-a"].shovels["s2"].alive is False, 5.0)
         assert cabs["s1-a"].shovels["s1"].alive
     finally:
         for m in made:
@@ -99,15 +105,6 @@ def test_fleet_through_a_router(tmp_path: Path, e2e_table: SignalsTable,
         router.communicate("", timeout=10)
 
 
-def _wait(pred: Any, timeout: float) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if pred():
-            return True
-        time.sleep(0.05)
-    return pred()
-
-
 def test_cab_catches_up_on_passes_made_while_the_router_was_down(
         tmp_path: Path, e2e_table: SignalsTable, params: ModelParams) -> None:
     """Zenoh does not re-send what was published while a link was down; the cab asks
@@ -115,13 +112,7 @@ def test_cab_catches_up_on_passes_made_while_the_router_was_down(
     pass of the open truck."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
 
-    def start_router() -> subprocess.Popen[str]:
-        r = subprocess.Popen([sys.executable, "-c", ROUTER, endpoint], stdin=subprocess.PIPE,
-                             stdout=subprocess.PIPE, text=True)
-        assert r.stdout is not None and r.stdout.readline().strip() == "up"
-        return r
-
-    router = start_router()
+    router = start_router(endpoint)
     cab = CabState()
     client: CabClient | None = None
     svc = None
@@ -131,16 +122,16 @@ def test_cab_catches_up_on_passes_made_while_the_router_was_down(
         svc, feed = table_service(e2e_table, cfg, params)  # the last truck stays open
         svc.start(zenoh_wait_s=5.0)
         client = CabClient(cab, [endpoint], "client", "s1")
-        assert _wait(lambda: "s1" in cab.shovels and cab.shovels["s1"].alive, 5.0)
+        assert wait_for(lambda: "s1" in cab.shovels and cab.shovels["s1"].alive, 5.0)
         router.communicate("", timeout=10)  # the router goes away
-        assert _wait(lambda: cab.shovels["s1"].alive is False, 10.0)
+        assert wait_for(lambda: cab.shovels["s1"].alive is False, 10.0)
         svc.run(threading.Event(), done=lambda: feed.finished)  # all passes, heard by nobody
         svc.flush()
         assert [p["pass"] for p in svc.status()["truck_passes"]] == [3]
         assert cab.shovels["s1"].passes == []  # nothing reached the cab
-        router = start_router()
+        router = start_router(endpoint)
         # both sessions reconnect; the token reappears and the cab asks status
-        assert _wait(lambda: [p["pass"] for p in cab.shovels["s1"].passes] == [3], 30.0), \
+        assert wait_for(lambda: [p["pass"] for p in cab.shovels["s1"].passes] == [3], 30.0), \
             cab.shovels["s1"]
         view = cab.shovels["s1"]
         assert view.alive and view.truck is not None

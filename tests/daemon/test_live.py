@@ -9,7 +9,6 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import Any
 
 from hil_fixtures.virtual_shovel import VirtualShovel
 from shoveld.daemon.config import parse_config
@@ -17,7 +16,7 @@ from shoveld.daemon.service import Service
 from shoveld.model.params import ModelParams
 from shoveld.signals.table import SignalsTable
 
-from .conftest import PARAMS, free_port
+from .conftest import PARAMS, free_port, wait_for
 
 PEER = """
 import sys, time, zenoh, json
@@ -34,15 +33,6 @@ time.sleep(60)
 
 def problems_of(svc: Service) -> list[str]:
     return list((svc.health_msg or {}).get("problems") or [])
-
-
-def wait_for(pred: Any, timeout: float) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if pred():
-            return True
-        time.sleep(0.05)
-    return pred()
 
 
 def test_faults_are_reported_and_the_loop_keeps_its_rate(

@@ -6,7 +6,6 @@ import itertools
 import math
 import threading
 import time
-from collections.abc import Callable
 
 import can
 import pytest
@@ -17,6 +16,8 @@ from drivers.xsens.orientation import gravity_in_sensor
 from hil_fixtures.mti_can import MtiCanEmulator
 from shoveld.installation import wrap_deg
 
+from .conftest import collect, wait_for
+
 _channels = itertools.count()
 
 
@@ -26,21 +27,6 @@ def channel() -> str:
 
 def source(t: float) -> tuple[float, float, float]:
     return (0.5 * math.sin(0.7 * t), 20.0 * math.sin(1.3 * t) - 5.0, wrap_deg(170.0 + 40.0 * t))
-
-
-def collect(drv: MtiCanDriver, seconds: float) -> list[Reading]:
-    out: list[Reading] = []
-    end = time.monotonic() + seconds
-    while time.monotonic() < end:
-        drv.read(out.append)
-    return out
-
-
-def wait_for(cond: Callable[[], bool], timeout: float = 5.0) -> None:
-    end = time.monotonic() + timeout
-    while not cond():
-        assert time.monotonic() < end, "condition not reached in time"
-        time.sleep(0.01)
 
 
 def test_default_ids_and_scalings() -> None:

@@ -25,6 +25,8 @@ from hil_fixtures.mti import MtiEmulator, angles_from_signals
 from shoveld.installation import Installation, wrap_deg
 from shoveld.signals import SignalsTable
 
+from .conftest import collect, wait_for
+
 
 def source(t: float) -> tuple[float, float, float]:
     """A swinging, hoisting saddle block: smooth and crossing the yaw wrap."""
@@ -42,22 +44,6 @@ def make_driver(port: str, **kw: object) -> MtiSerialDriver:
                                "backoff_s": (0.05, 0.2)}
     args.update(kw)
     return MtiSerialDriver.from_config(args)
-
-
-def collect(drv: MtiSerialDriver, seconds: float) -> list[Reading]:
-    out: list[Reading] = []
-    end = time.monotonic() + seconds
-    while time.monotonic() < end:
-        drv.read(out.append)
-    return out
-
-
-def wait_for(cond: Callable[[], bool], timeout: float = 5.0) -> None:
-    end = time.monotonic() + timeout
-    while not cond():
-        if time.monotonic() > end:
-            raise AssertionError("condition not reached in time")
-        time.sleep(0.01)
 
 
 def ang_err(a: float, b: float) -> float:
