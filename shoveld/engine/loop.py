@@ -20,6 +20,7 @@ from shoveld.cycle.phases import DIG, DUMP, ESTIMATING, IDLE, PHASES, PhaseConfi
 from shoveld.kinematics.causal import CROWD, HANDLE, SWING, JointFilter
 from shoveld.kinematics.fixed_lag import FixedLagSavgol
 from shoveld.model.kin import Kinematics
+from shoveld.model.output import CurrentEquations, noise_sigma
 from shoveld.model.params import ModelParams
 from shoveld.payload.rls import PayloadRls, RlsConfig
 from shoveld.payload.trucks import Truck
@@ -122,6 +123,9 @@ class Engine:
             self.cfg.window_s, dt, 3)
         self.phases = PhaseMachine(self.cfg.phases)
         self.noise = (params.noise["handle"], params.noise["crowd"])
+        self.current_noise = params.current_noise
+        """The calibration's current-noise model; empty for a params file of the old
+        equation-error form, which the filter then runs in its own units."""
         self.rls: PayloadRls | None = None
         self.pass_index = first_pass - 1
         self._cycle = 0
@@ -274,10 +278,21 @@ class Engine:
                        boom=np.radians(c[7]), i_h=c[8], i_c=c[9], i_hf=c[10], swing=c[11],
                        swing_rate=c[12], swing_acc=c[13], roll=np.radians(c[14]),
                        pitch=np.radians(c[15]))
+        m = self.rls.payload_kg if self.rls.n else 0.0
+        if self.current_noise:
+            # Current units: measured minus predicted current per channel, each sample
+            # weighted by its channel's noise at its reading (shoveld.model.output).
+            ce = CurrentEquations(self.model, k)
+            a, b = ce.payload_equations(self.p)
+            sig = noise_sigma(self.current_noise, ce.currents())
+            ok = np.isfinite(a).all(axis=1) & np.isfinite(b).all(axis=1)
+            if not ok.all():
+                a, b, sig = a[ok], b[ok], sig[ok]
+            self.rls.update(a, b, -ce.jacobian(self.p, m)[ok], sigma=sig)
+            return
         w, phi, psi = self.model.regressor(k)
         a = phi + psi @ self.p
         b = -(w @ self.p)
-        m = self.rls.payload_kg if self.rls.n else 0.0
         self.rls.update(a, b, -(w + m * psi))
 
     def _std(self) -> float:

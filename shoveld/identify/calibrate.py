@@ -1,11 +1,14 @@
-"""Least-squares identification of the model parameters (``shoveld calibrate``).
+"""Identification of the model parameters (``shoveld calibrate``).
 
-The thesis's method: the equations are homogeneous in the parameters, so empty
-and known-load trials are stacked and the known load fixes the scale. Static
-poses (no motion) identify the gravity parameters alone; the dynamic parameters
-follow from moving samples with the gravity part held. ``method="joint"`` fits
-everything at once instead. Samples where the model does not hold are excluded
-with a reason, and the report says how many and why.
+Empty and known-load trials are stacked; the known load fixes the scale (the
+equations are otherwise homogeneous). ``method="output"`` (the default) fits the
+measured hoist and crowd currents as the outputs, weighted by their noise, with
+the current sensors' offsets and the hoist's pull per ampere over the field
+current (``shoveld.identify.output_error``). ``method="equation"`` is the thesis's
+form with the currents inside the regressor (normalised by K_H), kept as the
+starting point and for comparison: its errors in variables bias K_H and K_C low.
+Samples where the model does not hold are excluded with a reason, and the report
+says how many and why.
 """
 
 from __future__ import annotations
@@ -17,14 +20,19 @@ from typing import Any
 
 import numpy as np
 
+from shoveld.identify import output_error
+from shoveld.identify.output_error import fit_output
 from shoveld.kinematics.offline import offline_kinematics
 from shoveld.model.kin import Kinematics
 from shoveld.model.model import EQUATIONS, Model
 from shoveld.model.params import ModelParams
 from shoveld.signals.table import SignalsTable
 
-STATIC_PARAMS = ("Md", "MdLc", "K_H", "K_C")
-"""Gravity-part parameters of the base model, identified from static poses."""
+METHODS = ("output", "equation")
+FIELD_KNOT_STEP_A = 10.0
+"""Spacing of the knots of the hoist's pull-per-ampere curve over the field current."""
+FIELD_KNOT_MIN_SAMPLES = 150
+"""Samples within half a step of a knot for the data to carry that knot."""
 
 
 @dataclass(frozen=True)
@@ -83,15 +91,50 @@ def exclusion_masks(table: SignalsTable, model: Model, cfg: ExclusionConfig,
     from shoveld.cycle.offline import label_phases
     from shoveld.cycle.phases import DIG, DUMP
 
-    phases = label_phases(kin)
-    mark(phases == DIG, "digging (bank forces are not in the model)")
-    mark(phases == DUMP, "dumping (payload leaving the dipper)")
+    if not fixed_load_trial(table):
+        # A trial with one known load all through (a calibration trial: held poses and
+        # free motion in the air) has no bank and no dump; the phase machine would take
+        # its rising strokes for digging.
+        phases = label_phases(kin)
+        mark(phases == DIG, "digging (bank forces are not in the model)")
+        mark(phases == DUMP, "dumping (payload leaving the dipper)")
     use = reasons == ""
     static = use & (np.abs(np.degrees(np.nan_to_num(kin.thd))) < cfg.static_rate_deg_s) & (
         np.abs(np.nan_to_num(kin.dd)) < cfg.static_crowd_m_s) & (
         np.abs(np.degrees(np.nan_to_num(kin.thdd))) < cfg.static_acc_deg_s2)
     excluded = Counter(str(r) for r in reasons[~use])
     return FileData(table.source, kin, payload, use, static, excluded)
+
+
+def fixed_load_trial(table: SignalsTable) -> bool:
+    """Does the table carry one known load all through (a calibration trial)?"""
+    if "known_payload_kg" in table.meta:
+        return True
+    pay = table.payload_truth()
+    return bool(len(pay) and np.all(np.isfinite(pay)) and np.ptp(pay) == 0.0)
+
+
+def choose_field_knots(tables: list[SignalsTable], step: float = FIELD_KNOT_STEP_A,
+                       min_samples: int = FIELD_KNOT_MIN_SAMPLES) -> tuple[float, list[float]]:
+    """The nominal hoisting field and the knots where the data have field currents.
+
+    Nominal: the field the drive holds most of the time at speed (median of the upper
+    field values). Knots every ``step`` amps below (and one above) it, kept where at
+    least ``min_samples`` samples lie within half a step.
+    """
+    i_f = np.concatenate([t.columns["hoist_field_a"] for t in tables])
+    i_f = i_f[np.isfinite(i_f)]
+    if not len(i_f):
+        return 70.0, []
+    top = np.percentile(i_f, 95)
+    nominal = float(np.round(np.median(i_f[i_f > 0.85 * top])))
+    knots: list[float] = []
+    for kn in [nominal + step, *(nominal - step * j for j in range(1, 10))]:
+        if kn < 10.0:
+            break
+        if np.count_nonzero(np.abs(i_f - kn) < step / 2) >= min_samples:
+            knots.append(float(kn))
+    return nominal, sorted(knots)
 
 
 def integrated_autocorrelation(r: np.ndarray, max_lag: int = 200) -> float:
@@ -183,7 +226,7 @@ class Calibrator:
     """Identify the parameters of ``model`` from calibration trials (fit/predict style)."""
 
     model: Model = field(default_factory=Model.from_names)
-    method: str = "staged"
+    method: str = "output"
     exclusion: ExclusionConfig = field(default_factory=ExclusionConfig)
     window_s: float = 0.5
     files_: list[FileData] = field(default_factory=list, init=False)
@@ -193,36 +236,47 @@ class Calibrator:
     def prepare(self, tables: list[SignalsTable]) -> list[FileData]:
         return [exclusion_masks(t, self.model, self.exclusion, self.window_s) for t in tables]
 
-    def _rows(self, files: list[FileData], which: str) -> tuple[np.ndarray, np.ndarray]:
-        """Stacked (W + m Psi), y = -m phi, and the equation index, for chosen samples."""
-        ws, ys = [], []
+    def _choose_field_knots(self, tables: list[SignalsTable]) -> None:
+        """Give the hoist drive its field-current knots from the data, unless given."""
+        hoist = next((t for t in self.model.terms if t.name == "hoist_drive"), None)
+        if hoist is None or "field_knots_a" in hoist.hyper:
+            return
+        nominal, knots = choose_field_knots(tables)
+        hyper = {**hoist.hyper, "field_nominal_a": nominal, "field_knots_a": knots}
+        self.model = Model([type(hoist)(**hyper) if t is hoist else t for t in self.model.terms])
+
+    def _rows(self, files: list[FileData]) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+        """Stacked (W + m Psi), y = -m phi of the used samples, and per file the per-row
+        mask of equations that carry information."""
+        ws, ys, oks = [], [], []
+        ex = self.exclusion
         for f in files:
-            mask = f.static if which == "static" else f.use
-            if which != "static":
-                mask = f.use & ~f.static
+            mask = f.use
             if not mask.any():
                 continue
             k = f.kin.take(mask)
             w, phi, psi = self.model.regressor(k)
             m = f.payload[mask][:, None, None]
-            w = w + m * psi
-            y = -m[:, :, 0] * phi
-            if which != "static":
-                # Near standstill the sign of a noisy rate is a coin toss: Coulomb friction
-                # is undetermined there, so those equation rows carry no information.
-                ex = self.exclusion
-                slow = np.stack([np.abs(k.thd) < np.radians(ex.friction_min_rate_deg_s),
-                                 np.abs(k.dd) < ex.friction_min_crowd_m_s], axis=1)
-                slow &= ~f.static[mask][:, None]
-                w = np.where(slow[:, :, None], 0.0, w)
-                y = np.where(slow, 0.0, y)
-            ws.append(w)
-            ys.append(y)
+            # Near standstill the sign of a noisy rate is a coin toss: Coulomb friction is
+            # undetermined there, so those equation rows carry no information (held poses
+            # excepted: there the friction is whatever holds them, and the rows keep
+            # gravity).
+            slow = np.stack([np.abs(k.thd) < np.radians(ex.friction_min_rate_deg_s),
+                             np.abs(k.dd) < ex.friction_min_crowd_m_s], axis=1)
+            slow &= ~f.static[mask][:, None]
+            ws.append(np.where(slow[:, :, None], 0.0, w + m * psi))
+            ys.append(np.where(slow, 0.0, -m[:, :, 0] * phi))
+            oks.append(~slow)
+        n_p = len(self.model.param_names)
         if not ws:
-            return np.zeros((0, 2, len(self.model.param_names))), np.zeros((0, 2))
-        return np.concatenate(ws), np.concatenate(ys)
+            return np.zeros((0, 2, n_p)), np.zeros((0, 2)), []
+        return np.concatenate(ws), np.concatenate(ys), oks
 
     def fit(self, tables: list[SignalsTable]) -> Calibrator:
+        method = {"joint": "equation", "staged": "equation"}.get(self.method, self.method)
+        if method not in METHODS:
+            raise ValueError(f"unknown method {self.method!r}; use one of {', '.join(METHODS)}")
+        self._choose_field_knots(tables)
         for t in self.model.terms:
             # A term with a nonlinear constant (a delay, a radius) finds it first by a 1-D
             # search over fits of this same calibrator (shoveld.model.effects).
@@ -231,7 +285,7 @@ class Calibrator:
                 search(self, tables)
         self.files_ = self.prepare(tables)
         names = self.model.param_names
-        w_all, y_all = self._rows(self.files_, "all")
+        w_all, y_all, oks = self._rows(self.files_)
         if len(w_all) < 10:
             raise ValueError("fewer than 10 usable samples after exclusions: "
                              + "; ".join(f"{f.name}: {dict(f.excluded)}" for f in self.files_))
@@ -240,56 +294,62 @@ class Calibrator:
         if not np.any(loads > 0):
             raise ValueError("no sample with a known non-zero payload: the equations are "
                              "homogeneous, a known-load trial is needed to fix the scale")
-        sigma = np.array([1e5, 1e4])
-        static_names = [n for t in self.model.terms for n in
-                        getattr(t, "static_params", STATIC_PARAMS) if n in t.params]
-        p = np.zeros(len(names))
-        for _ in range(2):  # second pass reweights with the first pass's residual RMS
-            self.stages_ = []
-            cov = np.zeros((len(names), len(names)))
-            if self.method == "staged":
-                w_s, y_s = self._rows(self.files_, "static")
-                si = [names.index(n) for n in static_names]
-                di = [i for i in range(len(names)) if i not in si]
-                if len(w_s) < 4 * len(si):
-                    raise ValueError(f"only {len(w_s)} static samples: the staged method needs "
-                                     "static poses (or use method='joint')")
-                p_s, cov_s = self._stage("static (gravity)", w_s, y_s, si, sigma)
-                p[si] = p_s
-                cov[np.ix_(si, si)] = cov_s
-                w_d, y_d = self._rows(self.files_, "dynamic")
-                y_d = y_d - w_d[:, :, si] @ p_s
-                p_d, cov_d = self._stage("dynamic", w_d, y_d, di, sigma)
-                p[di] = p_d
-                cov[np.ix_(di, di)] = cov_d
-            elif self.method == "joint":
-                idx = list(range(len(names)))
-                p, cov = self._stage("joint", w_all, y_all, idx, sigma)
-            else:
-                raise ValueError(f"unknown method {self.method!r}; use 'staged' or 'joint'")
-            res = (w_all @ p) - y_all
-            sigma = np.sqrt(np.mean(res**2, axis=0))
-        cond = condition_number((w_all / sigma[None, :, None]).reshape(-1, len(names)))
+        p, cov, sigma = self._fit_equation(w_all, y_all)
+        fit: dict[str, Any] = {"method": method, "samples": int(len(w_all))}
+        current_noise: dict[str, list[float]] = {}
+        if method == "output":
+            files = [f for f in self.files_ if f.use.any()]
+            of = fit_output(self.model, [f.kin.take(f.use) for f in files],
+                            [f.payload[f.use] for f in files],
+                            [np.asarray(o) for o in oks], p)
+            p, cov = of.p, of.cov
+            sigma = np.array([of.force_rms["handle"], of.force_rms["crowd"]])
+            current_noise = of.noise
+            fit.update(condition_number=of.condition_number,
+                       residual_rms={eq: float(s) for eq, s in zip(EQUATIONS, sigma,
+                                                                    strict=True)},
+                       current_residual_rms_a=of.residual_rms, iterations=of.iterations,
+                       covariance=f"sandwich over {of.blocks} blocks of "
+                                  f"{output_error.BLOCK_S:g} s")
+        else:
+            cond = condition_number((w_all / sigma[None, :, None]).reshape(-1, len(names)))
+            fit.update(condition_number=cond,
+                       residual_rms={eq: float(s) for eq, s in zip(EQUATIONS, sigma,
+                                                                    strict=True)})
         hyper = {t.name: dict(t.hyper) for t in self.model.terms if t.hyper}
         excluded: dict[str, Any] = {}
         for f in self.files_:
             excluded[f.name] = {"used": int(f.use.sum()), "static": int(f.static.sum()),
                                 **{k: int(v) for k, v in f.excluded.items()}}
-        fit: dict[str, Any] = {
-            "method": self.method, "samples": int(len(w_all)),
-            "condition_number": cond,
-            "residual_rms": {eq: float(s) for eq, s in zip(EQUATIONS, sigma, strict=True)},
-            "stages": {s.name: {"params": s.params, "samples": s.samples,
-                                "condition_number": s.condition_number,
-                                "residual_rms": s.residual_rms} for s in self.stages_},
-            "excluded": excluded,
-        }
+        fit["excluded"] = excluded
         self.params_ = ModelParams(
             terms=self.model.term_names, names=names, values=p,
             stderr=np.sqrt(np.clip(np.diag(cov), 0, None)), cov=cov,
             noise={eq: float(s) for eq, s in zip(EQUATIONS, sigma, strict=True)},
-            hyper=hyper, fit=fit)
+            hyper=hyper, fit=fit, current_noise=current_noise)
         return self
+
+    def _fit_equation(self, w_all: np.ndarray, y_all: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The thesis's equation-error form, normalised by K_H, reweighted once by each
+        equation's residual RMS. The current sensors' offsets are not in this form (they
+        stay 0)."""
+        names = self.model.param_names
+        idx = list(range(len(names)))
+        off = self.model.offset_index
+        if off is not None:
+            idx = [i for i in idx if i not in off]
+        sigma = np.array([1e5, 1e4])
+        p = np.zeros(len(names))
+        cov = np.zeros((len(names), len(names)))
+        for _ in range(2):  # second pass reweights with the first pass's residual RMS
+            self.stages_ = []
+            p_i, cov_i = self._stage("equation", w_all, y_all, idx, sigma)
+            p[idx] = p_i
+            cov[np.ix_(idx, idx)] = cov_i
+            res = (w_all @ p) - y_all
+            sigma = np.sqrt(np.mean(res**2, axis=0))
+        return p, cov, sigma
 
     def _stage(self, name: str, w: np.ndarray, y: np.ndarray, idx: list[int],
                sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -78,6 +78,27 @@ class Model:
                 phi = phi + extra_phi(k)
         return w_all, phi, psi_all
 
+    def current_derivatives(self, k: Kinematics) -> tuple[np.ndarray, np.ndarray]:
+        """d W / d i_H and d W / d i_C, each (N, 2, P): how the residual of each equation
+        moves per ampere of measured hoist and crowd current, per unit of each parameter
+        (terms linear in a measured current; see ``Term.current_derivative``)."""
+        dh, dc = [], []
+        for t in self.terms:
+            d = t.current_derivative(k)
+            if d is None:
+                z = np.zeros((len(k), 2, len(t.params)))
+                d = (z, z)
+            dh.append(d[0])
+            dc.append(d[1])
+        return np.concatenate(dh, axis=2), np.concatenate(dc, axis=2)
+
+    @property
+    def offset_index(self) -> tuple[int, int] | None:
+        """Indices of the hoist and crowd current offsets among the parameters."""
+        if "i_H0" in self.param_names and "i_C0" in self.param_names:
+            return self.param_names.index("i_H0"), self.param_names.index("i_C0")
+        return None
+
     def payload_equations(self, k: Kinematics, p: np.ndarray
                           ) -> tuple[np.ndarray, np.ndarray]:
         """(a, b), each (N, 2), such that the payload m satisfies a * m = b."""

@@ -39,6 +39,9 @@ class ModelParams:
     """Residual RMS per equation on the calibration data (N m, N)."""
     hyper: dict[str, dict[str, Any]] = field(default_factory=dict)
     fit: dict[str, Any] = field(default_factory=dict)
+    current_noise: dict[str, list[float]] = field(default_factory=dict)
+    """Per current channel (hoist, crowd): [s0 A, s1] of the noise model
+    sqrt(s0^2 + (s1 i)^2); the payload filter weights each sample by it."""
 
     def model(self) -> Model:
         m = Model.from_names([t for t in self.terms], self.hyper)
@@ -97,6 +100,9 @@ def save_params(path: str | Path, p: ModelParams, units: list[str] | None = None
     for n, v, se, u in zip(p.names, p.values, p.stderr, units, strict=True):
         _table(lines, f"params.{n}", {"value": float(v), "stderr": float(se), "unit": u})
     _table(lines, "noise", {k: float(v) for k, v in p.noise.items()})
+    if p.current_noise:
+        _table(lines, "current_noise", {k: [float(x) for x in v]
+                                        for k, v in p.current_noise.items()})
     for term, h in p.hyper.items():
         if h:
             _table(lines, f"hyper.{term}", h)
@@ -156,7 +162,18 @@ def load_params(path: str | Path) -> ModelParams:
         c = np.asarray(cov_d.get("matrix"), dtype=float)
         if c.shape == (n, n):
             cov = c
+    current_noise: dict[str, list[float]] = {}
+    cn = doc.get("current_noise", {})
+    if not isinstance(cn, dict):
+        raise ParamsFileError(f"{spath}: key 'current_noise' must be a table")
+    for ch, v in cn.items():
+        if (not isinstance(v, list) or len(v) != 2
+                or not all(isinstance(x, (int, float)) and math.isfinite(x) and x >= 0
+                           for x in v)):
+            raise ParamsFileError(f"{spath}: key 'current_noise.{ch}' must be two non-negative "
+                                  "numbers [amps, fraction of the reading]")
+        current_noise[ch] = [float(x) for x in v]
     return ModelParams(terms=list(model.term_names), names=model.param_names,
                        values=np.asarray(values), stderr=np.asarray(stderr), cov=cov,
                        noise=noise, hyper={k: dict(v) for k, v in hyper.items()},
-                       fit=dict(doc.get("fit", {})))
+                       fit=dict(doc.get("fit", {})), current_noise=current_noise)

@@ -64,6 +64,11 @@ class Term:
         depend on the payload."""
         return None
 
+    def current_derivative(self, k: Kinematics) -> tuple[np.ndarray, np.ndarray] | None:
+        """Derivatives of the columns by the measured hoist and crowd currents, for terms
+        linear in a measured current (None: the term does not use one)."""
+        return None
+
     def transform(self, cols: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         """Adjust the raw signals before kinematics (e.g. re-align a delayed stream).
 
@@ -111,18 +116,105 @@ class RigidArm(Term):
         return _stack((md_th, md_d), (mlc_th, mlc_d))
 
 
+def field_basis(i_f: np.ndarray, knots: tuple[float, ...]) -> np.ndarray:
+    """(N, K) weights of the hoist field current on the knots of a smooth curve.
+
+    Between knots: a natural cubic spline through the knot values (linear in them; a
+    magnetisation curve is smooth, and straight segments 10 A long left 0.2-0.3 % of
+    K_H unexplained between knots). Above the highest knot: constant (the iron is
+    saturated). Below the lowest: proportional to the field (unsaturated iron, flux ~
+    field current), the physical way out of the calibrated range.
+    """
+    kn = np.asarray(knots, dtype=float)
+    x = np.nan_to_num(np.asarray(i_f, dtype=float), nan=kn[-1])
+    if len(kn) == 1:
+        out = np.ones((len(x), 1))
+        out[:, 0] = np.where(x < kn[0], np.maximum(x, 0.0) / kn[0], 1.0)
+        return out
+    out = _spline_basis(tuple(kn))(np.clip(x, kn[0], kn[-1]))
+    below = x < kn[0]
+    if below.any():
+        out[below, :] = 0.0
+        out[below, 0] = np.maximum(x[below], 0.0) / kn[0]
+    return out
+
+
+_SPLINES: dict[tuple[float, ...], Any] = {}
+
+
+def _spline_basis(knots: tuple[float, ...]) -> Any:
+    """The natural cubic spline through each unit vector of knot values (cached)."""
+    sp = _SPLINES.get(knots)
+    if sp is None:
+        from scipy.interpolate import CubicSpline
+
+        n = len(knots)
+        sp = CubicSpline(np.asarray(knots), np.eye(n), bc_type="natural" if n > 2 else
+                         "not-a-knot") if n > 2 else _Linear(knots)
+        _SPLINES[knots] = sp
+    return sp
+
+
+class _Linear:
+    """Two knots: a straight line (a spline needs three)."""
+
+    def __init__(self, knots: tuple[float, ...]) -> None:
+        self.a, self.b = knots
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        f = (x - self.a) / (self.b - self.a)
+        return np.stack([1.0 - f, f], axis=1)
+
+
 @register_term
 class HoistDrive(Term):
-    """Hoist rope tension K_H * i_H acting at the bail along the rope."""
+    """Hoist rope tension K_H(i_f) * i_H acting at the bail along the rope.
+
+    A DC motor's pull per ampere is proportional to its flux, and the flux follows the
+    field current along the motor's magnetisation curve; the drive weakens the field
+    above base speed (hoisting fast, lowering). K_H(i_f) is a piecewise-linear curve
+    through knots of the field current (hyper-parameter ``field_knots_a``, chosen by
+    the calibration where its data have field currents); its value at the nominal
+    field is the parameter ``K_H``, at the other knots ``K_H_f<A>``. Linear in all of
+    them, so the same least squares identifies the curve.
+    """
 
     name = "hoist_drive"
     params = ("K_H",)
     units = ("N/A",)
-    description = "hoist motors' pull on the rope per ampere"
+    description = "hoist motors' pull on the rope per ampere, over the hoist field current"
     base = True
 
+    def __init__(self, **hyper: Any) -> None:
+        super().__init__(**hyper)
+        nominal = float(hyper.get("field_nominal_a", 70.0))
+        knots = tuple(sorted({nominal, *(float(k) for k in hyper.get("field_knots_a", ()))}))
+        self.knots = knots
+        self.nominal_index = knots.index(nominal)
+        self.params = tuple("K_H" if k == nominal else f"K_H_f{k:g}" for k in knots)
+        self.units = tuple("N/A" for _ in knots)
+        self.uses_field_current = len(knots) > 1
+        """Terms with this flag model the field: no sample is excluded for a weak field."""
+
+    def _basis(self, k: Kinematics) -> np.ndarray:
+        if len(self.knots) == 1:
+            return np.ones((len(k), 1))
+        return field_basis(k.i_hf, self.knots)
+
     def columns(self, k: Kinematics) -> np.ndarray:
-        return _stack((-k.i_h * k.d * k.sin_a3, k.i_h * k.cos_a3))
+        return self.current_columns(k, k.i_h)
+
+    def current_columns(self, k: Kinematics, i_h: np.ndarray | float) -> np.ndarray:
+        """The columns per unit of ``i_h`` (pass ones for the derivative by the current)."""
+        h = self._basis(k)
+        u_th = -k.d * k.sin_a3 * i_h
+        u_d = k.cos_a3 * i_h
+        return np.stack([u_th[:, None] * h, u_d[:, None] * h], axis=1)
+
+    def current_derivative(self, k: Kinematics) -> tuple[np.ndarray, np.ndarray]:
+        """d(columns)/d(i_H) and d(columns)/d(i_C)."""
+        d_h = self.current_columns(k, np.ones(len(k)))
+        return d_h, np.zeros_like(d_h)
 
 
 @register_term
@@ -137,6 +229,10 @@ class CrowdDrive(Term):
 
     def columns(self, k: Kinematics) -> np.ndarray:
         return _stack((np.zeros_like(k.d), -k.i_c))
+
+    def current_derivative(self, k: Kinematics) -> tuple[np.ndarray, np.ndarray]:
+        z = np.zeros_like(k.d)
+        return _stack((z, z)), _stack((z, -np.ones_like(z)))
 
 
 @register_term
@@ -169,6 +265,29 @@ class Friction(Term):
                       (z, k.dd), (z, smooth_sign(k.dd, SIGN_EPS_D)))
 
 
+@register_term
+class CurrentOffsets(Term):
+    """Zero offsets of the hoist (sum of both motors) and crowd current transducers.
+
+    A Hall-effect transducer reads a few amps with no current; the offset belongs to
+    the installation. It lives on the measurement side, not in the dynamics: the
+    current equations (``shoveld.model.output``) compare measured minus offset with
+    the current the model predicts. In force units its columns are zero.
+    """
+
+    name = "current_offsets"
+    params = ("i_H0", "i_C0")
+    units = ("A", "A")
+    description = "zero offsets of the hoist and crowd current sensors"
+    base = True
+    output_offsets = True
+
+    def columns(self, k: Kinematics) -> np.ndarray:
+        return np.zeros((len(k), 2, 2))
+
+
 BASE_TERMS: tuple[str, ...] = ("rigid_arm", "hoist_drive", "crowd_drive", "arm_inertia",
-                               "friction")
-"""The thesis's two-joint model; parameter order [Md, MdLc, K_H, K_C, J, fv3, fc3, fv4, fc4]."""
+                               "friction", "current_offsets")
+"""The thesis's two-joint model with the hoist's pull per ampere over the field current
+and the current sensors' offsets; parameter order [Md, MdLc, K_H (K_H_f<A> ...), K_C, J,
+fv3, fc3, fv4, fc4, i_H0, i_C0]."""

@@ -48,26 +48,32 @@ class PayloadRls:
         self._s_aa = 0.0
         self._s_adb: np.ndarray | None = None
 
-    def update(self, a: np.ndarray, b: np.ndarray, db_dp: np.ndarray | None = None) -> None:
-        """A block of samples: ``a[k] * m = b[k]`` for the handle and crowd equations.
+    def update(self, a: np.ndarray, b: np.ndarray, db_dp: np.ndarray | None = None,
+               sigma: np.ndarray | None = None) -> None:
+        """A block of samples: ``a[k] * m = b[k]`` for the two equations (channels).
 
         ``a``, ``b`` are (N, 2). One filterpy update with the stacked measurement is the
         same as N sequential updates when there is no forgetting, and N times cheaper.
-        ``db_dp`` (N, 2, P), the sensitivity of ``b`` to the model parameters, lets
-        :meth:`param_std_kg` carry the calibration's uncertainty into the pass.
+        ``sigma`` (N, 2) is each row's noise std (default: the constant per-equation
+        noise given at construction). ``db_dp`` (N, 2, P), the sensitivity of ``b`` to
+        the model parameters, lets :meth:`param_std_kg` carry the calibration's
+        uncertainty into the pass.
         """
         a = np.asarray(a, dtype=float).reshape(-1, 2)
         b = np.asarray(b, dtype=float).reshape(-1, 2)
         n = len(a)
         if n == 0:
             return
+        var = (np.tile(self.r_diag, (n, 1)) if sigma is None
+               else np.square(np.asarray(sigma, dtype=float).reshape(-1, 2)))
         kf = self.kf
         kf.Q = np.array([[(self.cfg.forgetting_std_kg_per_s**2) * self.dt * n]])
         kf.predict()
-        kf.update(b.reshape(-1, 1), R=np.diag(np.tile(self.r_diag, n)), H=a.reshape(-1, 1))
+        kf.update(b.reshape(-1, 1), R=np.diag(var.reshape(-1)), H=a.reshape(-1, 1))
         self._nis_sum += float((kf.y.T @ kf.SI @ kf.y)[0, 0])
         self._nis_dof += 2 * n
-        nu = (kf.y[:, 0].reshape(n, 2) / np.sqrt(self.r_diag))
+        nu = kf.y[:, 0].reshape(n, 2) / np.sqrt(var)
+        last = nu[-1]
         if self._prev_nu is not None:
             nu_prev = np.vstack([self._prev_nu[None, :], nu[:-1]])
         else:
@@ -75,9 +81,9 @@ class PayloadRls:
             nu = nu[1:] if n > 1 else nu[:0]
         self._corr_num += float(np.sum(nu * nu_prev))
         self._corr_den += float(np.sum(nu * nu))
-        self._prev_nu = kf.y[-2:, 0] / np.sqrt(self.r_diag)
+        self._prev_nu = last
         if db_dp is not None:
-            wa = a / self.r_diag
+            wa = a / var
             self._s_aa += float(np.sum(wa * a))
             s = np.einsum("ke,kep->p", wa, np.asarray(db_dp))
             self._s_adb = s if self._s_adb is None else self._s_adb + s

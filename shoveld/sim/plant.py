@@ -12,7 +12,7 @@ later tries to explain it.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -182,16 +182,20 @@ def first_order_lag(x: np.ndarray, dt: float, tau: float) -> np.ndarray:
 class Plant:
     """Inverse dynamics of the shovel arm, with optional effects (``shoveld.sim.effects``)."""
 
-    def __init__(self, params: PlantParams | None = None, effects: list[Any] | None = None
-                 ) -> None:
+    def __init__(self, params: PlantParams | None = None, effects: list[Any] | None = None,
+                 drive: Any = None) -> None:
         self.p = params or PlantParams()
         self.effects = list(effects or [])
+        self.drive = drive
+        """A ``shoveld.sim.machine.FieldDrive`` (field weakening above base speed), or None
+        for the two-level field of the thesis."""
 
     def run(self, motion: Motion) -> PlantContext:
         """Currents and field currents (true, noise-free) for the prescribed motion."""
         pp = self.p
         dt = float(motion.t[1] - motion.t[0])
-        ctx = PlantContext(motion=motion, params=pp, dt=dt, effects=self.effects)
+        ctx = PlantContext(motion=motion, params=pp, dt=dt, effects=self.effects,
+                           drive=self.drive)
         for e in self.effects:
             e.before_dynamics(ctx)
         th, d, boom = motion.th, motion.d, ctx.get("boom_true", motion.boom)
@@ -211,18 +215,32 @@ class Plant:
         tau_u, along_u = rope_force_geometry(th, d, boom, pp.l_bs)
         rope = need[:, 0] / tau_u
         crowd_force = need[:, 1] - rope * along_u
-        # Hoist field follows the rope's direction: hoisting (rope shortening) 70 A,
-        # lowering 30 A, through the winding's first-order lag.
         lr = derivative(rope_length(th, d, boom, pp.l_bs), dt)
-        target = np.where(lr > 0.02, pp.hoist_field_lowering_a, pp.hoist_field_hoisting_a)
-        i_hf = first_order_lag(target, dt, pp.hoist_field_tau_s)
+        if self.drive is None:
+            # Hoist field follows the rope's direction: hoisting (rope shortening) 70 A,
+            # lowering 30 A, through the winding's first-order lag.
+            target = np.where(lr > 0.02, pp.hoist_field_lowering_a, pp.hoist_field_hoisting_a)
+            i_hf = first_order_lag(target, dt, pp.hoist_field_tau_s)
+            flux = pp.flux_ratio
+        else:
+            i_hf = first_order_lag(self.drive.field_target(lr), dt, self.drive.tau_s)
+            flux = self.drive.flux_ratio
         ctx.update(need=need, rope_force=rope, crowd_force=crowd_force, i_hf=i_hf, thd=thd,
                    dd=dd)
         for e in self.effects:
             e.before_currents(ctx)
-        i_h = ctx["rope_force"] / (pp.K_H * pp.flux_ratio(ctx["i_hf"]))
+        k_h = pp.K_H * flux(ctx["i_hf"])
+        i_h = ctx["rope_force"] / k_h
         i_c = ctx["crowd_force"] / pp.K_C
         ctx.update(i_h=i_h, i_c=i_c)
+        # Currents per kilogram of payload (the Cramer-Rao bound's sensitivities): the
+        # payload body alone, through the same virtual work and rope geometry.
+        pay = [b for b in ctx["bodies"] if b.name == "payload"]
+        if pay:
+            unit = replace(pay[0], mass=1.0)
+            qm = generalized_forces([unit], th, d, boom, dt, ctx.get("gravity", GRAVITY))
+            rope_m = qm[:, 0] / tau_u
+            ctx.update(di_h_dm=rope_m / k_h, di_c_dm=(qm[:, 1] - rope_m * along_u) / pp.K_C)
         for e in self.effects:
             e.currents(ctx)
         # Swing: house inertia plus the arm and payload at their radius.

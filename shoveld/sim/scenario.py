@@ -16,6 +16,7 @@ import numpy as np
 
 from shoveld.cycle.phases import PHASES
 from shoveld.signals.table import SignalsTable
+from shoveld.sim.machine import Channel, Installation, Machine, slow_wave
 from shoveld.sim.plant import Motion, Plant, PlantParams
 
 FINE_HZ = 500.0
@@ -90,10 +91,12 @@ class PassTruth:
     payload_kg: float
     phases: dict[str, tuple[float, float]]
     verified: bool = False
+    crb_kg: float = math.nan
+    """Cramer-Rao bound of the payload from this pass's lift and swing currents."""
 
     def as_dict(self) -> dict[str, Any]:
         return {"pass": self.index, "truck": self.truck, "payload_kg": self.payload_kg,
-                "verified": self.verified, "start_s": self.phases["dig"][0],
+                "verified": self.verified, "crb_kg": self.crb_kg, "start_s": self.phases["dig"][0],
                 "end_s": self.phases["dump"][1],
                 "phases": {k: list(v) for k, v in self.phases.items()}}
 
@@ -150,7 +153,8 @@ def motion_from_timeline(tl: Timeline, rng: np.random.Generator, boom_deg: float
 
 @dataclass
 class SensorNoise:
-    """Standard deviations of the logged signals (per sample, white)."""
+    """Standard deviations of the logged signals (per sample, white): the ideal machine's
+    sensors. A realistic machine's are in ``shoveld.sim.machine.Installation``."""
 
     handle_deg: float = 0.03
     crowd_m: float = 0.002
@@ -160,48 +164,110 @@ class SensorNoise:
     current_rel: float = 0.003
     field_a: float = 0.3
     incl_deg: float = 0.05
-    adc_lsb_a: float = 4000.0 / 32768.0
 
     def scaled(self, k: float) -> SensorNoise:
-        return SensorNoise(**{n: v * k if n != "adc_lsb_a" else v
-                              for n, v in self.__dict__.items()})
+        return SensorNoise(**{n: v * k for n, v in self.__dict__.items()})
+
+    def installation(self, base: Installation | None = None) -> Installation:
+        """``base`` (default: unbiased 16-bit sensors) with these noise levels."""
+        from dataclasses import replace
+
+        b = base or Installation()
+
+        def arm(c: Channel) -> Channel:
+            return replace(c, noise_a=self.current_a, noise_rel=self.current_rel)
+
+        def fld(c: Channel) -> Channel:
+            return replace(c, noise_a=self.field_a, noise_rel=0.0)
+
+        return replace(b, hoist1=arm(b.hoist1), hoist2=arm(b.hoist2), crowd=arm(b.crowd),
+                       swing=arm(b.swing), hoist_field=fld(b.hoist_field),
+                       crowd_field=fld(b.crowd_field), swing_field=fld(b.swing_field),
+                       handle_deg=self.handle_deg, crowd_m=self.crowd_m,
+                       swing_deg=self.swing_deg, boom_deg=self.boom_deg, incl_deg=self.incl_deg)
 
 
-def measure(motion: Motion, ctx: dict[str, Any], rate_hz: float, noise: SensorNoise,
+DEFAULT_MACHINE_SEED = 0
+"""The machine ``simulate_*`` use when given none: a realistic one."""
+
+
+def resolve_machine(machine: Machine | None, params: PlantParams | None,
+                    noise: SensorNoise | None) -> Machine:
+    """The machine to simulate: the given one; else the ideal one when plant parameters
+    or a noise level are given (the old interface); else the default realistic one."""
+    from dataclasses import replace
+
+    if machine is None:
+        machine = Machine.ideal() if (params or noise) else Machine.draw(DEFAULT_MACHINE_SEED)
+    if params is not None:
+        machine = replace(machine, plant=params)
+    if noise is not None:
+        machine = replace(machine, sensors=noise.installation(
+            machine.sensors if machine.realistic else None))
+    return machine
+
+
+def measure(motion: Motion, ctx: dict[str, Any], rate_hz: float, machine: Machine,
             rng: np.random.Generator, effects: list[Any]) -> dict[str, np.ndarray]:
-    """Sample the true signals at the logger's rate and add sensor noise."""
+    """Sample the true signals at the logger's rate, through the machine's sensors."""
     dt = float(motion.t[1] - motion.t[0])
     step = max(1, int(round(1.0 / (rate_hz * dt))))
     idx = np.arange(0, len(motion.t), step)
     n = len(idx)
-    pp: PlantParams = ctx["params"]
-
-    def cur(x: np.ndarray) -> np.ndarray:
-        y = x + rng.normal(0, 1, n) * (noise.current_a + noise.current_rel * np.abs(x))
-        return np.round(y / noise.adc_lsb_a) * noise.adc_lsb_a
-
+    pp = machine.plant
+    s = machine.sensors
+    t = motion.t[idx]
+    split = s.split + slow_wave(t, s.split_wander, s.split_period_s, rng)
+    drift = slow_wave(t, s.handle_drift_deg, s.drift_period_s, rng)
     i_h = ctx["i_h"][idx]
+    ones = np.ones(n)
     cols = {
-        "time_s": motion.t[idx],
-        "handle_deg": np.degrees(motion.th[idx]) + rng.normal(0, noise.handle_deg, n),
-        "crowd_m": motion.d[idx] + rng.normal(0, noise.crowd_m, n),
-        "swing_deg": np.degrees(motion.swing[idx]) + rng.normal(0, noise.swing_deg, n),
-        "boom_deg": np.degrees(motion.boom[idx]) + rng.normal(0, noise.boom_deg, n),
-        "hoist1_a": cur(pp.hoist_split * i_h),
-        "hoist2_a": cur((1 - pp.hoist_split) * i_h),
-        "hoist_field_a": ctx["i_hf"][idx] + rng.normal(0, noise.field_a, n),
-        "crowd_a": cur(ctx["i_c"][idx]),
-        "crowd_field_a": pp.crowd_field_a + rng.normal(0, noise.field_a, n),
-        "swing_a": cur(ctx["i_s"][idx]),
-        "swing_field_a": pp.swing_field_a + rng.normal(0, noise.field_a, n),
-        "roll_deg": rng.normal(0, noise.incl_deg, n),
-        "pitch_deg": rng.normal(0, noise.incl_deg, n),
+        "time_s": t,
+        "handle_deg": np.degrees(motion.th[idx]) + drift + rng.normal(0, s.handle_deg, n),
+        "crowd_m": motion.d[idx] + rng.normal(0, s.crowd_m, n),
+        "swing_deg": np.degrees(motion.swing[idx]) + rng.normal(0, s.swing_deg, n),
+        "boom_deg": np.degrees(motion.boom[idx]) + rng.normal(0, s.boom_deg, n),
+        "hoist1_a": s.hoist1.read(split * i_h, rng),
+        "hoist2_a": s.hoist2.read((1 - split) * i_h, rng),
+        "hoist_field_a": s.hoist_field.read(ctx["i_hf"][idx], rng),
+        "crowd_a": s.crowd.read(ctx["i_c"][idx], rng),
+        "crowd_field_a": s.crowd_field.read(pp.crowd_field_a * ones, rng),
+        "swing_a": s.swing.read(ctx["i_s"][idx], rng),
+        "swing_field_a": s.swing_field.read(pp.swing_field_a * ones, rng),
+        "roll_deg": rng.normal(0, s.incl_deg, n),
+        "pitch_deg": rng.normal(0, s.incl_deg, n),
         "payload_kg": np.full(n, np.nan),
     }
     ctx["sample_index"] = idx
+    ctx["split"] = split
     for e in effects:
         e.measure(cols, ctx, rng)
     return cols
+
+
+def payload_information(ctx: dict[str, Any], machine: Machine, t0: float, t1: float) -> float:
+    """Fisher information (1/kg^2) of the payload in the logged currents between t0 and t1.
+
+    From the current-noise model alone, channels as measured: the sensitivity of each
+    logged current to the payload (the plant's virtual work per kilogram, through the
+    channel's gain) over that channel's noise at the sample's reading. The Cramer-Rao
+    bound of an unbiased payload estimate from those samples is 1 / sqrt(information).
+    """
+    idx = ctx["sample_index"]
+    t = ctx["motion"].t[idx]
+    sel = (t >= t0) & (t <= t1)
+    if "di_h_dm" not in ctx or not sel.any():
+        return 0.0
+    s = machine.sensors
+    j = idx[sel]
+    split = ctx["split"][sel]
+    i_h, i_c = ctx["i_h"][j], ctx["i_c"][j]
+    g_h = split * (1 + s.hoist1.gain) + (1 - split) * (1 + s.hoist2.gain)
+    var_h = s.hoist1.sigma(split * i_h) ** 2 + s.hoist2.sigma((1 - split) * i_h) ** 2
+    var_c = s.crowd.sigma(i_c) ** 2
+    dh = ctx["di_h_dm"][j] * g_h
+    dc = ctx["di_c_dm"][j] * (1 + s.crowd.gain)
+    return float(np.sum(dh * dh / var_h) + np.sum(dc * dc / var_c))
 
 
 @dataclass
@@ -216,21 +282,23 @@ class SimResult:
         return {**self.truth, "passes": [p.as_dict() for p in self.passes]}
 
 
-def _finish(tl: Timeline, rng: np.random.Generator, pp: PlantParams, effects: list[Any],
-            rate_hz: float, noise: SensorNoise, meta: dict[str, str]) -> tuple[
-                SignalsTable, Motion, dict[str, Any]]:
+def _finish(tl: Timeline, rng: np.random.Generator, machine: Machine, effects: list[Any],
+            rate_hz: float, meta: dict[str, str]) -> tuple[SignalsTable, Motion, dict[str, Any]]:
+    pp = machine.plant
     motion = motion_from_timeline(tl, rng, pp.boom_deg)
-    ctx = Plant(pp, effects).run(motion)
-    cols = measure(motion, ctx, rate_hz, noise, rng, effects)
+    ctx = Plant(pp, effects, machine.drive).run(motion)
+    cols = measure(motion, ctx, rate_hz, machine, rng, effects)
+    name = "sim-ph2100" if not machine.realistic else f"sim-ph2100-m{machine.seed}"
     table = SignalsTable.from_arrays(meta={"sample_rate_hz": f"{rate_hz:g}",
-                                           "shovel": "sim-ph2100", **meta}, **cols)
+                                           "shovel": name, **meta}, **cols)
     return table, motion, ctx
 
 
 def simulate_cycles(n_passes: int, seed: int = 0, *, payload_range: tuple[float, float] = (
         3000.0, 35000.0), truck_target_kg: float | None = None, verified_fraction: float = 0.0,
         rate_hz: float = 50.0, params: PlantParams | None = None, effects: list[Any] | None = None,
-        noise: SensorNoise | None = None, payloads: list[float] | None = None) -> SimResult:
+        noise: SensorNoise | None = None, payloads: list[float] | None = None,
+        machine: Machine | None = None) -> SimResult:
     """Dig cycles loading trucks.
 
     With ``truck_target_kg`` the passes of a truck are drawn so the truck fills to about
@@ -238,9 +306,8 @@ def simulate_cycles(n_passes: int, seed: int = 0, *, payload_range: tuple[float,
     draws its payload from ``payload_range`` and a truck change comes every 4 passes.
     """
     rng = np.random.default_rng(seed)
-    pp = params or PlantParams()
+    machine = resolve_machine(machine, params, noise)
     effects = effects or []
-    noise = noise or SensorNoise()
     tl = Timeline()
     tl.go(3.0, "idle")
     passes: list[PassTruth] = []
@@ -269,13 +336,17 @@ def simulate_cycles(n_passes: int, seed: int = 0, *, payload_range: tuple[float,
             truck, in_truck, truck_load = truck + 1, 0, 0.0
         else:
             tl.go(rng.uniform(0.5, 2.0), "idle")
-    table, motion, ctx = _finish(tl, rng, pp, effects, rate_hz, noise, {})
+    table, motion, ctx = _finish(tl, rng, machine, effects, rate_hz, {})
     t = table.time
     col = table.columns["payload_kg"]
     for p in passes:
         if p.verified:
             col[(t >= p.phases["lift"][0]) & (t < p.phases["dump"][0] + 0.3)] = p.payload_kg
-    truth = {"scenario": "cycles", "seed": seed, "params": pp.as_dict(),
+        info = payload_information(ctx, machine, p.phases["lift"][0] + 0.4,
+                                   p.phases["swing"][1])
+        p.crb_kg = 1.0 / math.sqrt(info) if info > 0 else math.inf
+    truth = {"scenario": "cycles", "seed": seed, "params": machine.plant.as_dict(),
+             "machine": machine.describe(),
              "effects": {e.name: e.magnitude for e in effects},
              "truck_target_kg": truck_target_kg}
     return SimResult(table, passes, truth, motion, ctx)
@@ -284,12 +355,18 @@ def simulate_cycles(n_passes: int, seed: int = 0, *, payload_range: tuple[float,
 def simulate_calibration(load_kg: float, seed: int = 0, *, rate_hz: float = 50.0,
                          params: PlantParams | None = None, effects: list[Any] | None = None,
                          noise: SensorNoise | None = None, n_poses: int = 16,
-                         free_motion_s: float = 120.0) -> SimResult:
-    """A calibration trial with a fixed load: static poses, then free motion in the air."""
+                         free_motion_s: float = 120.0, fast_moves: int | None = None,
+                         machine: Machine | None = None) -> SimResult:
+    """A calibration trial with a fixed load: held poses, free motion in the air, then
+    fast hoisting and lowering strokes (on a machine that weakens its field, they sweep
+    the hoist field so that its pull per ampere can be identified over the range
+    operation uses)."""
     rng = np.random.default_rng(seed)
-    pp = params or PlantParams()
+    machine = resolve_machine(machine, params, noise)
+    pp = machine.plant
     effects = effects or []
-    noise = noise or SensorNoise()
+    if fast_moves is None:
+        fast_moves = 8 if machine.drive is not None else 0
     tl = Timeline(th=[-30.0], d=[7.0], payload=[load_kg])
     tl.go(2.0, "idle")
     ths = rng.permutation(np.linspace(-35, 28, n_poses))
@@ -303,10 +380,17 @@ def simulate_calibration(load_kg: float, seed: int = 0, *, rate_hz: float = 50.0
         th = float(np.clip(tl.th[-1] + rng.uniform(-25, 25), -40, 30))
         d = float(np.clip(tl.d[-1] + rng.uniform(-1.8, 1.8), 6.5, 10.5))
         tl.go(float(rng.uniform(2.5, 4.5)), "lift", th=th, d=d)
+    for _ in range(fast_moves):
+        d = float(rng.uniform(7.5, 10.0))
+        tl.go(float(rng.uniform(2.4, 3.2)), "lift", th=-36.0, d=d)
+        tl.go(1.0, "idle")
+        tl.go(float(rng.uniform(3.0, 4.0)), "lift", th=float(rng.uniform(2.0, 8.0)))
+        tl.go(1.0, "idle")
     tl.go(2.0, "idle")
-    table, motion, ctx = _finish(tl, rng, pp, effects, rate_hz, noise,
+    table, motion, ctx = _finish(tl, rng, machine, effects, rate_hz,
                                  {"known_payload_kg": f"{load_kg:g}"})
     table.columns["payload_kg"][:] = load_kg
     truth = {"scenario": "calibration", "seed": seed, "load_kg": load_kg,
-             "params": pp.as_dict(), "effects": {e.name: e.magnitude for e in effects}}
+             "params": pp.as_dict(), "machine": machine.describe(),
+             "effects": {e.name: e.magnitude for e in effects}}
     return SimResult(table, [], truth, motion, ctx)

@@ -1,0 +1,152 @@
+"""Output-error identification: the currents are the outputs, weighted by their noise.
+
+Minimises, over all parameters at once (the mechanics, the hoist's pull per ampere
+over the field current, the crowd's, and the current sensors' offsets), the sum of
+squared differences between measured and predicted hoist and crowd currents
+(``shoveld.model.output``), each divided by its channel's noise. The noise model
+sigma^2 = s0^2 + (s1 i)^2 per channel (a floor plus a part growing with the reading)
+is estimated from the residuals and the fit repeated with it (iteratively
+reweighted). Gauss-Newton from the equation-error solution; the problem is nearly
+linear, so a few steps converge.
+
+Standard errors are the sandwich (heteroscedasticity and autocorrelation robust)
+estimate over blocks of a few seconds: samples at 50 Hz are not independent, and a
+covariance that pretends they are claims far too much.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from shoveld.model.kin import Kinematics
+from shoveld.model.model import Model
+from shoveld.model.output import CHANNELS, CurrentEquations
+
+BLOCK_S = 4.0
+"""Length of the blocks over which residual scores are summed for the covariance."""
+
+
+@dataclass
+class OutputFit:
+    p: np.ndarray
+    cov: np.ndarray
+    noise: dict[str, list[float]]
+    """Per channel [s0 (A), s1 (fraction of the reading)]."""
+    residual_rms: dict[str, float]
+    """Per channel, A."""
+    force_rms: dict[str, float]
+    """The same residuals in the equations' own units (N m, N)."""
+    condition_number: float
+    samples: int
+    iterations: int
+    blocks: int
+
+
+def concat_kinematics(parts: list[Kinematics]) -> Kinematics:
+    names = [f.name for f in fields(Kinematics) if f.init]
+    return Kinematics(**{n: np.concatenate([getattr(k, n) for k in parts]) for n in names})
+
+
+def _noise_model(r: np.ndarray, i: np.ndarray) -> tuple[float, float]:
+    """s0, s1 with r^2 ~ s0^2 + s1^2 i^2 (non-negative least squares)."""
+    from scipy.optimize import nnls
+
+    a = np.stack([np.ones_like(i), i * i], axis=1)
+    scale = np.linalg.norm(a, axis=0)
+    scale[scale == 0] = 1.0
+    coef, _ = nnls(a / scale, r * r)
+    coef = coef / scale
+    s0 = math.sqrt(max(coef[0], 1e-6))
+    return s0, math.sqrt(max(coef[1], 0.0))
+
+
+def fit_output(model: Model, kins: list[Kinematics], payloads: list[np.ndarray],
+               row_ok: list[np.ndarray], p0: np.ndarray, max_iter: int = 25) -> OutputFit:
+    """Fit ``model`` to the used samples of each file (kinematics ``kins``, known
+    payloads, and per-sample per-channel masks ``row_ok``), starting from ``p0``."""
+    k = concat_kinematics(kins)
+    m = np.concatenate(payloads)
+    ok = np.concatenate(row_ok).astype(bool)
+    ce = CurrentEquations(model, k)
+    cur = np.abs(ce.currents())
+    blocks = np.concatenate([fi * 1_000_000 + np.floor((kk.t - kk.t[0]) / BLOCK_S)
+                             for fi, kk in enumerate(kins)]).astype(np.int64)
+    n_p = len(p0)
+    p = np.asarray(p0, dtype=float).copy()
+    off = model.offset_index
+    if off is not None:
+        p[list(off)] = 0.0
+
+    def weighted(p: np.ndarray, sig: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        r = ce.residual(p, m)
+        good = ok & np.isfinite(r)
+        w = np.where(good, 1.0 / sig, 0.0)
+        return np.where(good, r, 0.0) * w, w
+
+    r0 = ce.residual(p, m)
+    good0 = ok & np.isfinite(r0)
+    sig = np.ones_like(r0) * np.array([np.sqrt(np.mean(r0[good0[:, j], j] ** 2))
+                                       for j in range(2)])[None, :]
+    iterations = 0
+    for _outer in range(4):
+        for _ in range(max_iter):
+            iterations += 1
+            rw, w = weighted(p, sig)
+            jw = ce.jacobian(p, m) * w[:, :, None]
+            jw = np.where(np.isfinite(jw), jw, 0.0).reshape(-1, n_p)
+            scale = np.linalg.norm(jw, axis=0)
+            scale[scale == 0] = 1.0
+            step = np.linalg.lstsq(jw / scale, -rw.reshape(-1), rcond=None)[0] / scale
+            cost = float(np.sum(rw * rw))
+            lam = 1.0
+            while lam > 1e-4:
+                rn, _ = weighted(p + lam * step, sig)
+                if float(np.sum(rn * rn)) <= cost:
+                    break
+                lam *= 0.5
+            p = p + lam * step
+            if np.max(np.abs(lam * step) / (np.abs(p) + 1e-9)) < 1e-8:
+                break
+        r = ce.residual(p, m)
+        good = ok & np.isfinite(r)
+        new = np.empty_like(sig)
+        noise: dict[str, list[float]] = {}
+        for j, ch in enumerate(CHANNELS):
+            s0, s1 = _noise_model(r[good[:, j], j], cur[good[:, j], j])
+            noise[ch] = [s0, s1]
+            new[:, j] = np.sqrt(s0 * s0 + (s1 * cur[:, j]) ** 2)
+        if np.max(np.abs(new[good] - sig[good]) / sig[good]) < 0.01:
+            sig = new
+            break
+        sig = new
+
+    rw, w = weighted(p, sig)
+    jw = np.where(np.isfinite(ce.jacobian(p, m)), ce.jacobian(p, m), 0.0) * w[:, :, None]
+    jac_rows = jw.reshape(-1, n_p)
+    h = jac_rows.T @ jac_rows
+    h_inv = np.linalg.pinv(h)
+    # Sandwich: scores summed per block, so correlation within a block is counted.
+    scores = np.einsum("kep,ke->kp", jw, rw)
+    ids, inv = np.unique(blocks, return_inverse=True)
+    s_b = np.zeros((len(ids), n_p))
+    np.add.at(s_b, inv, scores)
+    nb = len(ids)
+    v = s_b.T @ s_b * (nb / max(1, nb - n_p))
+    cov = h_inv @ v @ h_inv
+    r = ce.residual(p, m)
+    good = ok & np.isfinite(r)
+    g_h = ce.dh[:, 0, :] @ p
+    g_c = ce.dc[:, 1, :] @ p
+    norms = np.linalg.norm(jac_rows, axis=0)
+    sv = np.linalg.svd(jac_rows / np.where(norms > 0, norms, 1.0), compute_uv=False)
+    return OutputFit(
+        p=p, cov=cov, noise=noise,
+        residual_rms={ch: float(np.sqrt(np.mean(r[good[:, j], j] ** 2)))
+                      for j, ch in enumerate(CHANNELS)},
+        force_rms={"handle": float(np.sqrt(np.mean((r[:, 0] * g_h)[good[:, 0]] ** 2))),
+                   "crowd": float(np.sqrt(np.mean((r[:, 1] * g_c)[good[:, 1]] ** 2)))},
+        condition_number=float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf,
+        samples=int(len(m)), iterations=iterations, blocks=nb)

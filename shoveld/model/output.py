@@ -1,0 +1,108 @@
+"""The model in current units: measured minus predicted motor current, per channel.
+
+The measured currents are the noisiest signals of the machine. Left inside the
+regressor (the thesis's form), their noise biases least squares towards zero
+(errors in variables), the crowd worst. Here each equation is solved for its own
+motor's current instead, so the currents are the *output* and the regressor holds
+kinematics only (output-error form; Janot, Vandanjon & Gautier's IDIM-IV and DIDIM
+do the same job):
+
+* hoist channel: the handle equation divided by how much it moves per ampere of
+  hoist current (``-K_H(i_f) d sin a3``): measured minus predicted hoist current;
+* crowd channel: the crowd equation with the rope force taken from the handle
+  equation, not from the measured hoist current (so its noise stays in its own
+  channel), divided by its change per ampere of crowd current (``-K_C``).
+
+The current sensors' offsets are subtracted on this side. Identification minimises
+these residuals weighted by each channel's noise; the payload filter uses the same
+equations, which are linear in the payload: ``residual = a m - b``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from shoveld.model.kin import Kinematics
+from shoveld.model.model import Model
+
+CHANNELS: tuple[str, str] = ("hoist", "crowd")
+
+
+class CurrentEquations:
+    """The model's current residuals on fixed kinematics (regressor evaluated once)."""
+
+    def __init__(self, model: Model, k: Kinematics) -> None:
+        self.model = model
+        self.w, self.phi, self.psi = model.regressor(k)
+        self.dh, self.dc = model.current_derivatives(k)
+        self.offsets = model.offset_index
+        self.i_h = k.i_h
+        self.i_c = k.i_c
+
+    def __len__(self) -> int:
+        return int(self.w.shape[0])
+
+    def _gains(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        g_h = self.dh[:, 0, :] @ p
+        """d e_handle / d i_H"""
+        c = -(self.dh[:, 1, :] @ p) / g_h
+        """the multiple of the handle equation that removes i_H from the crowd equation"""
+        g_c = self.dc[:, 1, :] @ p
+        return g_h, c, g_c
+
+    def _offsets(self, p: np.ndarray) -> tuple[float, float]:
+        if self.offsets is None:
+            return 0.0, 0.0
+        return float(p[self.offsets[0]]), float(p[self.offsets[1]])
+
+    def payload_equations(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(a, b), each (N, 2) in amps: the residual of a payload m is ``a m - b``."""
+        g_h, c, g_c = self._gains(p)
+        e_w = self.w @ p
+        e_m = self.phi + self.psi @ p
+        o_h, o_c = self._offsets(p)
+        a = np.stack([e_m[:, 0] / g_h, (e_m[:, 1] + c * e_m[:, 0]) / g_c], axis=-1)
+        b = -np.stack([e_w[:, 0] / g_h - o_h, (e_w[:, 1] + c * e_w[:, 0]) / g_c - o_c], axis=-1)
+        return a, b
+
+    def residual(self, p: np.ndarray, m: np.ndarray | float) -> np.ndarray:
+        """(N, 2): measured minus predicted hoist and crowd current, A."""
+        a, b = self.payload_equations(p)
+        m = np.broadcast_to(np.asarray(m, dtype=float), (len(self),))
+        return a * m[:, None] - b
+
+    def jacobian(self, p: np.ndarray, m: np.ndarray | float) -> np.ndarray:
+        """(N, 2, P): d residual / d p (exact, the model being linear in p per equation)."""
+        m = np.broadcast_to(np.asarray(m, dtype=float), (len(self),))
+        a_mat = self.w + m[:, None, None] * self.psi
+        e = a_mat @ p + m[:, None] * self.phi
+        dh0, dh1, dc1 = self.dh[:, 0, :], self.dh[:, 1, :], self.dc[:, 1, :]
+        g_h, c, g_c = self._gains(p)
+        jac = np.empty_like(a_mat)
+        r_h = e[:, 0] / g_h
+        jac[:, 0, :] = (a_mat[:, 0, :] - r_h[:, None] * dh0) / g_h[:, None]
+        dc_dp = -(dh1 * g_h[:, None] - (dh1 @ p)[:, None] * dh0) / (g_h**2)[:, None]
+        n = e[:, 1] + c * e[:, 0]
+        dn = a_mat[:, 1, :] + c[:, None] * a_mat[:, 0, :] + e[:, 0][:, None] * dc_dp
+        jac[:, 1, :] = (dn - (n / g_c)[:, None] * dc1) / g_c[:, None]
+        if self.offsets is not None:
+            jac[:, 0, self.offsets[0]] -= 1.0
+            jac[:, 1, self.offsets[1]] -= 1.0
+        return jac
+
+    def currents(self) -> np.ndarray:
+        """(N, 2) the measured hoist (sum) and crowd currents these equations explain."""
+        return np.stack([self.i_h, self.i_c], axis=-1)
+
+
+def noise_sigma(noise: dict[str, list[float]] | None, i: np.ndarray) -> np.ndarray:
+    """(N, 2) noise std per channel for measured currents ``i`` (N, 2): the calibration's
+    noise model sqrt(s0^2 + (s1 i)^2) per channel."""
+    if not noise:
+        raise ValueError("the params file has no current noise model ([current_noise]); "
+                         "calibrate again with this version")
+    out = np.empty_like(i, dtype=float)
+    for j, ch in enumerate(CHANNELS):
+        s0, s1 = noise[ch]
+        out[:, j] = np.sqrt(s0 * s0 + (s1 * i[:, j]) ** 2)
+    return out
