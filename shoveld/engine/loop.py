@@ -218,7 +218,10 @@ class Engine:
             self.pass_index += 1
             self._cycle += 1
             self.pass_start = t
-            self.rls = PayloadRls(self.noise, self.dt, self.cfg.rls)
+            tau = None
+            if self.current_noise and all(len(v) > 2 for v in self.current_noise.values()):
+                tau = (self.current_noise["hoist"][2], self.current_noise["crowd"][2])
+            self.rls = PayloadRls(self.noise, self.dt, self.cfg.rls, tau=tau)
             self._cached = (-1, math.nan, math.nan)
             self.batch.clear()
             self.invalid_updates = 0

@@ -34,7 +34,8 @@ class OutputFit:
     p: np.ndarray
     cov: np.ndarray
     noise: dict[str, list[float]]
-    """Per channel [s0 (A), s1 (fraction of the reading)]."""
+    """Per channel [s0 (A), s1 (fraction of the reading), tau (integrated autocorrelation
+    time of the normalised residuals, samples)]."""
     residual_rms: dict[str, float]
     """Per channel, A."""
     force_rms: dict[str, float]
@@ -138,6 +139,21 @@ def fit_output(model: Model, kins: list[Kinematics], payloads: list[np.ndarray],
     cov = h_inv @ v @ h_inv
     r = ce.residual(p, m)
     good = ok & np.isfinite(r)
+    # Residuals are correlated over the smoothing window (and the model's own misfit is
+    # smooth): a pass's payload, a weighted sum over its samples, varies by the
+    # integrated autocorrelation time more than white noise would.
+    from shoveld.identify.calibrate import integrated_autocorrelation
+
+    z = r / sig
+    starts = np.cumsum([0] + [len(kk) for kk in kins])
+    for j, ch in enumerate(CHANNELS):
+        taus, lens = [], []
+        for a, b in zip(starts[:-1], starts[1:], strict=True):
+            zz = z[a:b, j][good[a:b, j]]
+            if len(zz) > 50:
+                taus.append(integrated_autocorrelation(zz))
+                lens.append(len(zz))
+        noise[ch].append(float(np.average(taus, weights=lens)) if taus else 1.0)
     g_h = ce.dh[:, 0, :] @ p
     g_c = ce.dc[:, 1, :] @ p
     norms = np.linalg.norm(jac_rows, axis=0)

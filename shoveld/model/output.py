@@ -43,10 +43,10 @@ class CurrentEquations:
         return int(self.w.shape[0])
 
     def _gains(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        # d e_handle / d i_H; the multiple of the handle equation that removes i_H from
+        # the crowd equation; d e_crowd / d i_C
         g_h = self.dh[:, 0, :] @ p
-        """d e_handle / d i_H"""
         c = -(self.dh[:, 1, :] @ p) / g_h
-        """the multiple of the handle equation that removes i_H from the crowd equation"""
         g_c = self.dc[:, 1, :] @ p
         return g_h, c, g_c
 
@@ -103,6 +103,6 @@ def noise_sigma(noise: dict[str, list[float]] | None, i: np.ndarray) -> np.ndarr
                          "calibrate again with this version")
     out = np.empty_like(i, dtype=float)
     for j, ch in enumerate(CHANNELS):
-        s0, s1 = noise[ch]
+        s0, s1 = noise[ch][:2]
         out[:, j] = np.sqrt(s0 * s0 + (s1 * i[:, j]) ** 2)
     return out

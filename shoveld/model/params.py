@@ -40,8 +40,9 @@ class ModelParams:
     hyper: dict[str, dict[str, Any]] = field(default_factory=dict)
     fit: dict[str, Any] = field(default_factory=dict)
     current_noise: dict[str, list[float]] = field(default_factory=dict)
-    """Per current channel (hoist, crowd): [s0 A, s1] of the noise model
-    sqrt(s0^2 + (s1 i)^2); the payload filter weights each sample by it."""
+    """Per current channel (hoist, crowd): [s0 A, s1, tau] of the noise model
+    sqrt(s0^2 + (s1 i)^2), by which the payload filter weights each sample, and the
+    residuals' integrated autocorrelation time (samples), by which it widens its std."""
 
     def model(self) -> Model:
         m = Model.from_names([t for t in self.terms], self.hyper)
@@ -167,11 +168,12 @@ def load_params(path: str | Path) -> ModelParams:
     if not isinstance(cn, dict):
         raise ParamsFileError(f"{spath}: key 'current_noise' must be a table")
     for ch, v in cn.items():
-        if (not isinstance(v, list) or len(v) != 2
+        if (not isinstance(v, list) or len(v) not in (2, 3)
                 or not all(isinstance(x, (int, float)) and math.isfinite(x) and x >= 0
                            for x in v)):
-            raise ParamsFileError(f"{spath}: key 'current_noise.{ch}' must be two non-negative "
-                                  "numbers [amps, fraction of the reading]")
+            raise ParamsFileError(f"{spath}: key 'current_noise.{ch}' must be two or three "
+                                  "non-negative numbers [amps, fraction of the reading, "
+                                  "correlation time in samples]")
         current_noise[ch] = [float(x) for x in v]
     return ModelParams(terms=list(model.term_names), names=model.param_names,
                        values=np.asarray(values), stderr=np.asarray(stderr), cov=cov,

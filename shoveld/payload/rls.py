@@ -29,9 +29,13 @@ class RlsConfig:
 class PayloadRls:
     """The payload estimate of one pass."""
 
-    def __init__(self, noise: tuple[float, float], dt: float, cfg: RlsConfig | None = None
-                 ) -> None:
+    def __init__(self, noise: tuple[float, float], dt: float, cfg: RlsConfig | None = None,
+                 tau: tuple[float, float] | None = None) -> None:
         self.cfg = cfg or RlsConfig()
+        self.tau = tau
+        """Per channel, the residuals' integrated autocorrelation time (samples) measured
+        at calibration; None: estimate a lag-1 correlation from this pass's innovations."""
+        self._info = np.zeros(2)
         self.dt = dt
         self.r_diag = np.square(np.asarray(noise, dtype=float))
         kf = KalmanFilter(dim_x=1, dim_z=2)
@@ -82,6 +86,7 @@ class PayloadRls:
         self._corr_num += float(np.sum(nu * nu_prev))
         self._corr_den += float(np.sum(nu * nu))
         self._prev_nu = last
+        self._info += np.sum(a * a / var, axis=0)
         if db_dp is not None:
             wa = a / var
             self._s_aa += float(np.sum(wa * a))
@@ -107,6 +112,10 @@ class PayloadRls:
         if not self.n:
             return math.nan
         scale = max(1.0, self._nis_sum / max(1, self._nis_dof))
+        if self.tau is not None and self._info.sum() > 0:
+            # each channel's information counts 1/tau of a white sample's
+            infl = float(self._info @ np.asarray(self.tau)) / float(self._info.sum())
+            return math.sqrt(float(self.kf.P[0, 0]) * scale * max(1.0, infl))
         rho = self._corr_num / self._corr_den if self._corr_den > 0 else 0.0
         rho = min(max(rho, 0.0), 0.98)
         return math.sqrt(float(self.kf.P[0, 0]) * scale * (1 + rho) / (1 - rho))
