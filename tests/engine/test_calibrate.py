@@ -9,54 +9,93 @@ import pytest
 
 from shoveld.identify.calibrate import Calibrator
 from shoveld.model.params import ModelParams, ParamsFileError, load_params, save_params
-from shoveld.sim.plant import PlantParams
-from shoveld.sim.scenario import SimResult
+from shoveld.sim.machine import Machine
+from shoveld.sim.scenario import DEFAULT_MACHINE_SEED, SimResult, simulate_calibration
 
 
-def truth() -> dict[str, float]:
-    pp = PlantParams()
-    return {"Md": pp.Md, "MdLc": pp.Md * pp.Lc, "K_H": pp.K_H, "K_C": pp.K_C,
-            "J": pp.Izz + pp.Md * pp.Lc**2, "fv3": pp.fv3, "fc3": pp.fc3, "fv4": pp.fv4,
-            "fc4": pp.fc4}
+def machine_truth(machine: Machine, params: ModelParams) -> dict[str, float]:
+    """True values of the identified parameters: per *measured* ampere at the *measured*
+    field, offsets of the measured currents."""
+    tr = machine.identified_truth()
+    nominal = float(params.hyper["hoist_drive"]["field_nominal_a"])
+    out = {}
+    for n in params.names:
+        if n == "K_H":
+            out[n] = machine.k_h_at(nominal)
+        elif n.startswith("K_H_f"):
+            out[n] = machine.k_h_at(float(n[5:]))
+        else:
+            out[n] = tr[n]
+    return out
 
 
-def test_recovers_table5_values(params: ModelParams) -> None:
-    """Thesis Table 5 (Md, Lc, K_H, K_C) come back from data simulated with them."""
-    md, mdlc, kh, kc = (params.get(n) for n in ("Md", "MdLc", "K_H", "K_C"))
+@pytest.fixture(scope="module")
+def ideal_params() -> ModelParams:
+    m = Machine.ideal()
+    cal = Calibrator().fit([simulate_calibration(0.0, seed=201, machine=m).table,
+                            simulate_calibration(8420.0, seed=202, machine=m).table])
+    assert cal.params_ is not None
+    return cal.params_
+
+
+def test_recovers_table5_values(ideal_params: ModelParams) -> None:
+    """Thesis Table 5 (Md, Lc, K_H, K_C) come back from the ideal machine simulated with
+    them."""
+    md, mdlc, kh, kc = (ideal_params.get(n) for n in ("Md", "MdLc", "K_H", "K_C"))
     assert md == pytest.approx(56960, rel=0.01)
     assert mdlc / md == pytest.approx(3.27, rel=0.01)
     assert kh == pytest.approx(1715, rel=0.01)
     assert kc == pytest.approx(4418, rel=0.015)
 
 
-def test_all_parameters_within_their_uncertainty(params: ModelParams) -> None:
-    tr = truth()
-    for n, v, se in zip(params.names, params.values, params.stderr, strict=True):
+GRAVITY_AND_DRIVES = ("Md", "MdLc", "K_C", "i_H0", "i_C0")
+"""What the payload rests on: held by every machine within 3 standard errors."""
+
+
+def test_a_realistic_machine_is_recovered_within_its_standard_errors(params: ModelParams
+                                                                     ) -> None:
+    """Offsets, gain errors, 12-bit currents and field weakening: the gravity part, the
+    force constants over the field and the offsets come back within 3 standard errors
+    (the statistics over many machines are bench/payload_accuracy.py's)."""
+    tr = machine_truth(Machine.draw(DEFAULT_MACHINE_SEED), params)
+    checked = [n for n in params.names if n in GRAVITY_AND_DRIVES or n.startswith("K_H")]
+    assert len([n for n in checked if n.startswith("K_H")]) >= 3  # the curve has knots
+    for n in checked:
+        v, se = params.get(n), float(params.stderr[params.names.index(n)])
         assert se > 0
-        # The sim's friction law is smoother than the model's: allow 4 standard errors
-        # and a 6 % floor on the friction terms, 2 % on the rest.
-        floor = 0.06 if n.startswith("f") else 0.02
-        assert abs(v - tr[n]) < max(4 * se, floor * abs(tr[n])), (n, v, tr[n], se)
+        assert abs(v - tr[n]) < 3 * se, (n, v, tr[n], se)
+
+
+def test_thesis_form_is_biased_where_output_error_is_not(
+        calib_trials: tuple[SimResult, SimResult], params: ModelParams) -> None:
+    """Errors in variables and offsets: the thesis's form puts the noisy currents in the
+    regressor and knows no offsets; K_C comes out several standard errors low there."""
+    tr = machine_truth(Machine.draw(DEFAULT_MACHINE_SEED), params)
+    eq = Calibrator(method="equation").fit([t.table for t in calib_trials]).params_
+    assert eq is not None
+    se = float(params.stderr[params.names.index("K_C")])
+    assert eq.get("K_C") < tr["K_C"] - 5 * se
+    assert abs(params.get("K_C") - tr["K_C"]) < 3 * se
 
 
 def test_report_contents(params: ModelParams) -> None:
     fit = params.fit
-    assert fit["condition_number"] > 1
+    assert fit["method"] == "output" and fit["condition_number"] > 1
     assert set(fit["residual_rms"]) == {"handle", "crowd"}
+    assert set(fit["current_residual_rms_a"]) == {"hoist", "crowd"}
+    assert "sandwich" in fit["covariance"]
+    assert set(params.current_noise) == {"hoist", "crowd"}
+    # the field is modelled, so no sample is thrown away for it; a calibration trial
+    # (one load all through) is never taken for digging
     reasons = {k for ex in fit["excluded"].values() for k in ex}
-    assert any("weak hoist field" in r for r in reasons)
+    assert not any("weak hoist field" in r or "digging" in r for r in reasons), reasons
+    knots = params.hyper["hoist_drive"]["field_knots_a"]
+    assert min(knots) <= 40.0
 
 
 def test_needs_a_known_load(calib_trials: tuple[SimResult, SimResult]) -> None:
     with pytest.raises(ValueError, match="known non-zero payload"):
         Calibrator().fit([calib_trials[0].table])
-
-
-def test_noise_does_not_shrink_the_scale(calib_trials: tuple[SimResult, SimResult]) -> None:
-    """Guards the K_H normalisation: a plain fit shrinks all parameters by ~5 %."""
-    cal = Calibrator(method="joint").fit([t.table for t in calib_trials])
-    assert cal.params_ is not None
-    assert cal.params_.get("K_H") == pytest.approx(1715, rel=0.01)
 
 
 def test_params_file_round_trip(params: ModelParams, tmp_path: Path) -> None:
@@ -67,6 +106,8 @@ def test_params_file_round_trip(params: ModelParams, tmp_path: Path) -> None:
     np.testing.assert_allclose(back.values, params.values, rtol=1e-12)
     np.testing.assert_allclose(back.cov, params.cov, rtol=1e-12)
     assert back.noise == params.noise
+    assert back.current_noise == params.current_noise
+    assert back.hyper == params.hyper
 
 
 @pytest.mark.parametrize(("edit", "words"), [

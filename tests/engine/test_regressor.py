@@ -78,7 +78,7 @@ def test_regressor_matches_lagrangian(m: float) -> None:
     boom = np.radians(45.0)
     k = kin_at(t, i_h, i_c, boom)
     model = Model.from_names()
-    p = np.array([MD, MD * LC, KH, KC, IZZ + MD * LC**2, FV3, 0.0, FV4, 0.0])
+    p = np.array([MD, MD * LC, KH, KC, IZZ + MD * LC**2, FV3, 0.0, FV4, 0.0, 0.0, 0.0])
     res = model.residual(k, p, m)
     # Independent: actuators from the rope's force vector, friction viscous only.
     tau_u, along_u = rope_force_geometry(k.th, k.d, k.boom, PlantParams().l_bs)
@@ -95,7 +95,7 @@ def test_payload_equations_are_the_residual_in_m() -> None:
     t = np.linspace(1, 5, 9)
     k = kin_at(t, rng.uniform(200, 600, 9), rng.uniform(0, 100, 9), np.radians(45))
     model = Model.from_names()
-    p = np.array([MD, MD * LC, KH, KC, IZZ + MD * LC**2, FV3, 3e4, FV4, 1e4])
+    p = np.array([MD, MD * LC, KH, KC, IZZ + MD * LC**2, FV3, 3e4, FV4, 1e4, 0.0, 0.0])
     a, b = model.payload_equations(k, p)
     for m in (0.0, 12000.0):
         np.testing.assert_allclose(model.residual(k, p, m), a * m - b, rtol=1e-12, atol=1e-6)
