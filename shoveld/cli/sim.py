@@ -25,7 +25,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--verified-fraction", type=float, default=0.0,
                    help="share of passes whose scale-verified payload is written")
     p.add_argument("--rate", type=float, default=50.0, help="logger rate in Hz")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of the path and the noise")
+    p.add_argument("--machine", type=int, default=0, metavar="N",
+                   help="machine seed: draws the machine's mechanics, hoist drive and sensor "
+                        "installation (offsets, gains, noise); give every file of one "
+                        "machine the same N (default 0)")
+    p.add_argument("--ideal", action="store_true",
+                   help="the ideal machine instead: thesis values, unbiased 16-bit current "
+                        "sensors, no drift, the two-level hoist field")
     p.add_argument("--noise", type=float, default=1.0, help="sensor noise multiplier")
     p.add_argument("--effect", action="append", default=[], metavar="NAME[=MAGNITUDE]",
                    help="switch on a hidden physical effect (repeatable); see --list-effects")
@@ -48,7 +55,8 @@ def parse_effect_args(items: list[str]) -> dict[str, float | None]:
 def run(args: argparse.Namespace) -> int:
     from shoveld.signals.table import write_table
     from shoveld.sim import effects as fx
-    from shoveld.sim.scenario import SensorNoise, simulate_calibration, simulate_cycles
+    from shoveld.sim.machine import Machine
+    from shoveld.sim.scenario import simulate_calibration, simulate_cycles
 
     if args.list_effects:
         for name, cls in sorted(fx.SIM_EFFECTS.items()):
@@ -61,7 +69,11 @@ def run(args: argparse.Namespace) -> int:
         effects = fx.make_effects(parse_effect_args(args.effect))
     except ValueError as e:
         raise CliError(str(e)) from None
-    noise = SensorNoise().scaled(args.noise)
+    machine = Machine.ideal() if args.ideal else Machine.draw(args.machine)
+    if args.noise != 1.0:
+        from dataclasses import replace
+
+        machine = replace(machine, sensors=machine.sensors.scaled(args.noise))
     if args.scenario == "cycles":
         kw = {}
         if args.payload_range:
@@ -69,10 +81,10 @@ def run(args: argparse.Namespace) -> int:
         else:
             kw = {"truck_target_kg": args.truck_target}
         res = simulate_cycles(args.passes, args.seed, verified_fraction=args.verified_fraction,
-                              rate_hz=args.rate, effects=effects, noise=noise, **kw)
+                              rate_hz=args.rate, effects=effects, machine=machine, **kw)
     else:
         res = simulate_calibration(args.load, args.seed, rate_hz=args.rate, effects=effects,
-                                   noise=noise)
+                                   machine=machine)
     out = Path(args.out)
     write_table(out, res.table)
     Path(str(out) + ".truth.json").write_text(json.dumps(res.truth_json(), indent=1))
