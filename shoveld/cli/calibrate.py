@@ -14,12 +14,16 @@ from shoveld.cli.common import parse_effects, read_tables
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "calibrate", help="identify model parameters from empty and known-load trials",
-        description="Least squares over empty and known-load trials (the known load fixes "
-                    "the scale): static poses give the gravity parameters, moving samples "
-                    "the dynamic ones. Writes a params file and prints the report.")
+        description="Output-error least squares over empty and known-load trials (the "
+                    "known load fixes the scale): the measured hoist and crowd currents are "
+                    "the outputs, weighted by their noise; the current sensors' offsets and "
+                    "the hoist's pull per ampere over the field current are identified. "
+                    "Writes a params file and prints the report.")
     p.add_argument("files", nargs="+", metavar="FILE", help="signals tables")
     p.add_argument("--out", required=True, help="params file to write (TOML)")
-    p.add_argument("--method", choices=("staged", "joint"), default="staged")
+    p.add_argument("--method", choices=("output", "equation"), default="output",
+                   help="output: currents as outputs, weighted by their noise (default); "
+                        "equation: the thesis form, for comparison")
     p.add_argument("--effects", default="", metavar="NAME,...",
                    help="extension terms to add to the base model")
     p.add_argument("--window", type=float, default=0.5,

@@ -32,7 +32,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--min-gain", type=float, default=0.02,
                    help="smallest share of the held-out residual an effect must remove")
     p.add_argument("--max-effects", type=int, default=3)
-    p.add_argument("--method", choices=("staged", "joint"), default="staged")
+    p.add_argument("--method", choices=("output", "equation"), default="output",
+                   help="output: currents as outputs, weighted by their noise (default); "
+                        "equation: the thesis form, for comparison")
     p.add_argument("--no-engine", action="store_true",
                    help="skip re-running the live engine on the verified passes")
     p.set_defaults(func=run)

@@ -95,7 +95,7 @@ def engine_payloads(dataset: DataSet, ev: Evaluation) -> dict[int, float]:
 
 def diagnose(calib: list[SignalsTable], measured: list[SignalsTable],
              library: list[str] | None = None, cfg: SelectionConfig | None = None,
-             method: str = "staged", engine: bool = True) -> Diagnosis:
+             method: str = "output", engine: bool = True) -> Diagnosis:
     """Run the whole diagnosis (see the package doc)."""
     cfg = cfg or SelectionConfig()
     library = list(library or EFFECT_TERMS)

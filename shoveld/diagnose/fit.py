@@ -32,7 +32,7 @@ class DiagCalibrator(Calibrator):
     """The project's ``Calibrator``, fed the diagnosis's prepared data for a fold."""
 
     def __init__(self, model: Model, dataset: DataSet, train: set[int] | None,
-                 method: str = "staged") -> None:
+                 method: str = "output") -> None:
         super().__init__(model=model, method=method, exclusion=dataset.exclusion,
                          window_s=dataset.window_s)
         self.dataset = dataset
@@ -50,7 +50,7 @@ def needs_operation(model: Model, dataset: DataSet) -> bool:
 
 
 def fit(dataset: DataSet, effects: list[str], hyper: dict[str, dict[str, Any]],
-        train: set[int] | None, method: str = "staged") -> ModelParams:
+        train: set[int] | None, method: str = "output") -> ModelParams:
     """Identify base + ``effects`` on the trials (plus the passes in ``train``)."""
     model = Model.from_names(effects, {k: dict(v) for k, v in hyper.items()})
     cal = DiagCalibrator(model, dataset, train, method).fit(dataset.calib)
@@ -173,7 +173,7 @@ def score_pass(params: ModelParams, dataset: DataSet, p: Pass, sigma0: np.ndarra
 
 
 def evaluate(dataset: DataSet, effects: list[str], hyper: dict[str, dict[str, Any]],
-             sigma0: np.ndarray, valid_ref: list[np.ndarray], method: str = "staged",
+             sigma0: np.ndarray, valid_ref: list[np.ndarray], method: str = "output",
              final: bool = False, fold_hyper: list[dict[str, dict[str, Any]]] | None = None
              ) -> Evaluation:
     """Fit and judge base + ``effects`` on held-out passes (see the module doc).

@@ -137,7 +137,7 @@ def compare(dataset: DataSet, cur: Evaluation, cand: Evaluation, name: str, n_tr
 
 def forward_select(dataset: DataSet, library: list[str], sigma0: np.ndarray,
                    valid_ref: list[np.ndarray], cfg: SelectionConfig | None = None,
-                   method: str = "staged") -> Selection:
+                   method: str = "output") -> Selection:
     """Add the most effective significant candidate while one is significant."""
     cfg = cfg or SelectionConfig()
     cache: dict[tuple[str, ...], Evaluation] = {}
