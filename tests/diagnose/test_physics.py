@@ -89,7 +89,7 @@ def _truth(effect: str, mag: float) -> tuple[list[str], dict, dict[str, float]]:
     pp = PlantParams()
     vals = {"Md": pp.Md, "MdLc": pp.Md * pp.Lc, "K_H": pp.K_H, "K_C": pp.K_C,
             "J": pp.Izz + pp.Md * pp.Lc**2, "fv3": pp.fv3, "fc3": pp.fc3, "fv4": pp.fv4,
-            "fc4": pp.fc4}
+            "fc4": pp.fc4, "i_H0": 0.0, "i_C0": 0.0}
     hyper: dict = {}
     if effect == "swing_centrifugal":
         hyper = {effect: {"R0_m": mag}}
