@@ -219,8 +219,8 @@ class Engine:
             self._cycle += 1
             self.pass_start = t
             tau = None
-            if self.current_noise and all(len(v) > 2 for v in self.current_noise.values()):
-                tau = (self.current_noise["hoist"][2], self.current_noise["crowd"][2])
+            if self.current_noise:
+                tau = (self.current_noise["hoist"]["tau"], self.current_noise["crowd"]["tau"])
             self.rls = PayloadRls(self.noise, self.dt, self.cfg.rls, tau=tau)
             self._cached = (-1, math.nan, math.nan)
             self.batch.clear()
@@ -287,7 +287,7 @@ class Engine:
             # weighted by its channel's noise at its reading (shoveld.model.output).
             ce = CurrentEquations(self.model, k)
             a, b = ce.payload_equations(self.p)
-            sig = noise_sigma(self.current_noise, ce.currents())
+            sig = noise_sigma(self.current_noise, ce.currents(), ce.acc)
             ok = np.isfinite(a).all(axis=1) & np.isfinite(b).all(axis=1)
             if not ok.all():
                 a, b, sig = a[ok], b[ok], sig[ok]

@@ -4,7 +4,8 @@ Minimises, over all parameters at once (the mechanics, the hoist's pull per ampe
 over the field current, the crowd's, and the current sensors' offsets), the sum of
 squared differences between measured and predicted hoist and crowd currents
 (``shoveld.model.output``), each divided by its channel's noise. The noise model
-sigma^2 = s0^2 + (s1 i)^2 per channel (a floor plus a part growing with the reading)
+per channel (a floor, a part growing with the reading, parts growing with the
+joints' accelerations, where the rates estimated from the angles are least exact)
 is estimated from the residuals and the fit repeated with it (iteratively
 reweighted). Gauss-Newton from the equation-error solution; the problem is nearly
 linear, so a few steps converge.
@@ -23,7 +24,7 @@ import numpy as np
 
 from shoveld.model.kin import Kinematics
 from shoveld.model.model import Model
-from shoveld.model.output import CHANNELS, CurrentEquations
+from shoveld.model.output import CHANNELS, NOISE_KEYS, CurrentEquations, noise_regressors
 
 BLOCK_S = 4.0
 """Length of the blocks over which residual scores are summed for the covariance."""
@@ -33,9 +34,8 @@ BLOCK_S = 4.0
 class OutputFit:
     p: np.ndarray
     cov: np.ndarray
-    noise: dict[str, list[float]]
-    """Per channel [s0 (A), s1 (fraction of the reading), tau (integrated autocorrelation
-    time of the normalised residuals, samples)]."""
+    noise: dict[str, dict[str, float]]
+    """Per channel, the noise model (``shoveld.model.output.NOISE_KEYS``)."""
     residual_rms: dict[str, float]
     """Per channel, A."""
     force_rms: dict[str, float]
@@ -51,17 +51,16 @@ def concat_kinematics(parts: list[Kinematics]) -> Kinematics:
     return Kinematics(**{n: np.concatenate([getattr(k, n) for k in parts]) for n in names})
 
 
-def _noise_model(r: np.ndarray, i: np.ndarray) -> tuple[float, float]:
-    """s0, s1 with r^2 ~ s0^2 + s1^2 i^2 (non-negative least squares)."""
+def _noise_model(r: np.ndarray, reg: np.ndarray) -> np.ndarray:
+    """Coefficients c >= 0 with r^2 ~ reg @ c (non-negative least squares), floor > 0."""
     from scipy.optimize import nnls
 
-    a = np.stack([np.ones_like(i), i * i], axis=1)
-    scale = np.linalg.norm(a, axis=0)
+    scale = np.linalg.norm(reg, axis=0)
     scale[scale == 0] = 1.0
-    coef, _ = nnls(a / scale, r * r)
+    coef, _ = nnls(reg / scale, r * r)
     coef = coef / scale
-    s0 = math.sqrt(max(coef[0], 1e-6))
-    return s0, math.sqrt(max(coef[1], 0.0))
+    coef[0] = max(coef[0], 1e-6)
+    return coef
 
 
 def fit_output(model: Model, kins: list[Kinematics], payloads: list[np.ndarray],
@@ -72,7 +71,7 @@ def fit_output(model: Model, kins: list[Kinematics], payloads: list[np.ndarray],
     m = np.concatenate(payloads)
     ok = np.concatenate(row_ok).astype(bool)
     ce = CurrentEquations(model, k)
-    cur = np.abs(ce.currents())
+    reg = noise_regressors(ce.currents(), np.nan_to_num(ce.acc))
     blocks = np.concatenate([fi * 1_000_000 + np.floor((kk.t - kk.t[0]) / BLOCK_S)
                              for fi, kk in enumerate(kins)]).astype(np.int64)
     n_p = len(p0)
@@ -114,11 +113,11 @@ def fit_output(model: Model, kins: list[Kinematics], payloads: list[np.ndarray],
         r = ce.residual(p, m)
         good = ok & np.isfinite(r)
         new = np.empty_like(sig)
-        noise: dict[str, list[float]] = {}
+        noise: dict[str, dict[str, float]] = {}
         for j, ch in enumerate(CHANNELS):
-            s0, s1 = _noise_model(r[good[:, j], j], cur[good[:, j], j])
-            noise[ch] = [s0, s1]
-            new[:, j] = np.sqrt(s0 * s0 + (s1 * cur[:, j]) ** 2)
+            coef = _noise_model(r[good[:, j], j], reg[good[:, j], j])
+            noise[ch] = {k: math.sqrt(c) for k, c in zip(NOISE_KEYS, coef, strict=False)}
+            new[:, j] = np.sqrt(reg[:, j] @ coef)
         if np.max(np.abs(new[good] - sig[good]) / sig[good]) < 0.01:
             sig = new
             break
@@ -153,7 +152,7 @@ def fit_output(model: Model, kins: list[Kinematics], payloads: list[np.ndarray],
             if len(zz) > 50:
                 taus.append(integrated_autocorrelation(zz))
                 lens.append(len(zz))
-        noise[ch].append(float(np.average(taus, weights=lens)) if taus else 1.0)
+        noise[ch]["tau"] = float(np.average(taus, weights=lens)) if taus else 1.0
     g_h = ce.dh[:, 0, :] @ p
     g_c = ce.dc[:, 1, :] @ p
     norms = np.linalg.norm(jac_rows, axis=0)

@@ -38,6 +38,7 @@ class CurrentEquations:
         self.offsets = model.offset_index
         self.i_h = k.i_h
         self.i_c = k.i_c
+        self.acc = np.stack([k.thdd, k.ddd], axis=-1)
 
     def __len__(self) -> int:
         return int(self.w.shape[0])
@@ -95,14 +96,32 @@ class CurrentEquations:
         return np.stack([self.i_h, self.i_c], axis=-1)
 
 
-def noise_sigma(noise: dict[str, list[float]] | None, i: np.ndarray) -> np.ndarray:
-    """(N, 2) noise std per channel for measured currents ``i`` (N, 2): the calibration's
-    noise model sqrt(s0^2 + (s1 i)^2) per channel."""
+NOISE_KEYS = ("floor_a", "rel", "handle_acc_a", "crowd_acc_a", "tau")
+"""Per channel: a floor (A), a part of the reading, parts per unit of the handle's
+(rad/s^2) and the crowd's (m/s^2) acceleration (where the estimated rates are least
+exact), and the residuals' integrated autocorrelation time (samples)."""
+
+
+def noise_regressors(i: np.ndarray, acc: np.ndarray) -> np.ndarray:
+    """(N, 2, 4): what each channel's noise variance is linear in: 1, i^2, th''^2, d''^2."""
+    one = np.ones(len(i))
+    out = np.empty((len(i), 2, 4))
+    for j in range(2):
+        out[:, j] = np.stack([one, i[:, j] ** 2, acc[:, 0] ** 2, acc[:, 1] ** 2], axis=1)
+    return out
+
+
+def noise_sigma(noise: dict[str, dict[str, float]] | None, i: np.ndarray, acc: np.ndarray
+                ) -> np.ndarray:
+    """(N, 2) noise std per channel for measured currents ``i`` (N, 2) and the joints'
+    accelerations ``acc`` (N, 2: handle, crowd), from the calibration's noise model."""
     if not noise:
         raise ValueError("the params file has no current noise model ([current_noise]); "
                          "calibrate again with this version")
+    reg = noise_regressors(i, acc)
     out = np.empty_like(i, dtype=float)
     for j, ch in enumerate(CHANNELS):
-        s0, s1 = noise[ch][:2]
-        out[:, j] = np.sqrt(s0 * s0 + (s1 * i[:, j]) ** 2)
+        n = noise[ch]
+        coef = np.array([n["floor_a"], n["rel"], n["handle_acc_a"], n["crowd_acc_a"]]) ** 2
+        out[:, j] = np.sqrt(reg[:, j] @ coef)
     return out

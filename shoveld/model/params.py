@@ -39,10 +39,10 @@ class ModelParams:
     """Residual RMS per equation on the calibration data (N m, N)."""
     hyper: dict[str, dict[str, Any]] = field(default_factory=dict)
     fit: dict[str, Any] = field(default_factory=dict)
-    current_noise: dict[str, list[float]] = field(default_factory=dict)
-    """Per current channel (hoist, crowd): [s0 A, s1, tau] of the noise model
-    sqrt(s0^2 + (s1 i)^2), by which the payload filter weights each sample, and the
-    residuals' integrated autocorrelation time (samples), by which it widens its std."""
+    current_noise: dict[str, dict[str, float]] = field(default_factory=dict)
+    """Per current channel (hoist, crowd): the noise model by which the payload filter
+    weights each sample, and the residuals' correlation time by which it widens its std
+    (keys ``shoveld.model.output.NOISE_KEYS``)."""
 
     def model(self) -> Model:
         m = Model.from_names([t for t in self.terms], self.hyper)
@@ -102,7 +102,7 @@ def save_params(path: str | Path, p: ModelParams, units: list[str] | None = None
         _table(lines, f"params.{n}", {"value": float(v), "stderr": float(se), "unit": u})
     _table(lines, "noise", {k: float(v) for k, v in p.noise.items()})
     if p.current_noise:
-        _table(lines, "current_noise", {k: [float(x) for x in v]
+        _table(lines, "current_noise", {k: {n: float(x) for n, x in v.items()}
                                         for k, v in p.current_noise.items()})
     for term, h in p.hyper.items():
         if h:
@@ -163,18 +163,21 @@ def load_params(path: str | Path) -> ModelParams:
         c = np.asarray(cov_d.get("matrix"), dtype=float)
         if c.shape == (n, n):
             cov = c
-    current_noise: dict[str, list[float]] = {}
+    from shoveld.model.output import CHANNELS, NOISE_KEYS
+
+    current_noise: dict[str, dict[str, float]] = {}
     cn = doc.get("current_noise", {})
     if not isinstance(cn, dict):
         raise ParamsFileError(f"{spath}: key 'current_noise' must be a table")
-    for ch, v in cn.items():
-        if (not isinstance(v, list) or len(v) not in (2, 3)
-                or not all(isinstance(x, (int, float)) and math.isfinite(x) and x >= 0
-                           for x in v)):
-            raise ParamsFileError(f"{spath}: key 'current_noise.{ch}' must be two or three "
-                                  "non-negative numbers [amps, fraction of the reading, "
-                                  "correlation time in samples]")
-        current_noise[ch] = [float(x) for x in v]
+    for ch in CHANNELS if cn else ():
+        v = need(cn, ch, "current_noise.", dict)
+        current_noise[ch] = {}
+        for key in NOISE_KEYS:
+            x = need(v, key, f"current_noise.{ch}.", (int, float))
+            if not (math.isfinite(x) and x >= 0):
+                raise ParamsFileError(f"{spath}: key 'current_noise.{ch}.{key}' must be a "
+                                      "non-negative number")
+            current_noise[ch][key] = float(x)
     return ModelParams(terms=list(model.term_names), names=model.param_names,
                        values=np.asarray(values), stderr=np.asarray(stderr), cov=cov,
                        noise=noise, hyper={k: dict(v) for k, v in hyper.items()},
