@@ -44,8 +44,12 @@ def _summary(js: dict) -> str:
     lines = []
     if js["found"]:
         lines.append("found: " + ", ".join(js["found"]))
+        from shoveld.diagnose.report import finding_text
+
         for n in js["found"]:
             lines.append(f"  {n}: {js['causes'][n]}")
+            for f in js["physical"].get(n, []):
+                lines.append(f"    {finding_text(f)}")
     else:
         lines.append("found: nothing significant")
     lines.append("")

@@ -20,6 +20,7 @@ from shoveld.diagnose.data import DataSet, Pass
 from shoveld.identify.calibrate import Calibrator, FileData
 from shoveld.model.kin import Kinematics
 from shoveld.model.model import Model
+from shoveld.model.output import CurrentEquations, noise_sigma
 from shoveld.model.params import ModelParams
 from shoveld.signals.table import SignalsTable
 
@@ -118,34 +119,22 @@ def as_measured(k: Kinematics) -> Kinematics:
     return replace(k, i_h_est=k.i_h, i_c_est=k.i_c)
 
 
-def current_gains(model: Model, k: Kinematics, p: np.ndarray
-                  ) -> tuple[np.ndarray, np.ndarray]:
-    """Per sample, how much the handle residual changes per ampere of hoist current and
-    the crowd residual per ampere of crowd current (finite difference of the model)."""
-    e0 = model.residual(k, p, 0.0)
-    kh = replace(k, i_h=k.i_h + 1.0, i_h_est=k.i_h_est + 1.0)
-    kc = replace(k, i_c=k.i_c + 1.0, i_c_est=k.i_c_est + 1.0)
-    return model.residual(kh, p, 0.0)[:, 0] - e0[:, 0], model.residual(kc, p, 0.0)[:, 1] - e0[:, 1]
-
-
 def current_residuals(model: Model, k: Kinematics, p: np.ndarray, m: float | np.ndarray
                       ) -> np.ndarray:
-    """(N, 2): measured minus predicted hoist and crowd current, A. The hoist current is
-    predicted from the handle equation, the crowd current from the crowd equation with
-    the measured hoist current; ``k`` should come from ``as_measured``."""
-    e = model.residual(k, p, m)
-    g_h, g_c = current_gains(model, k, p)
-    return np.stack([e[:, 0] / g_h, e[:, 1] / g_c], axis=-1)
+    """(N, 2): measured minus predicted hoist and crowd current, A (``k`` should come
+    from ``as_measured``)."""
+    return CurrentEquations(model, k).residual(p, m)
 
 
 def score_pass(params: ModelParams, dataset: DataSet, p: Pass, sigma0: np.ndarray,
                valid_ref: list[np.ndarray]) -> PassScore:
     """Residual loss and payload estimate of one pass under ``params``.
 
-    Both are in current units: the residual of each equation divided by how much it
-    changes per ampere of its motor's current, i.e. measured minus predicted current,
-    which every model predicts whatever its parameters mean; ``sigma0`` (A per channel)
-    is the common unit.
+    Both in current units (``shoveld.model.output``): measured minus predicted hoist and
+    crowd current, which every model predicts whatever its parameters mean. The payload
+    is the noise-weighted least squares of the model's own noise model (as the engine
+    weighs it); the loss is in the common unit ``sigma0`` (A per channel), so models
+    with different noise models compare on the same scale.
     """
     model = params.model()
     view = dataset.view(model)
@@ -154,20 +143,20 @@ def score_pass(params: ModelParams, dataset: DataSet, p: Pass, sigma0: np.ndarra
     if len(idx) < 10:
         return PassScore(math.nan, math.nan, len(idx))
     k = as_measured(f.kin.take(idx))
-    w, phi, psi = model.regressor(k)
-    g_h, g_c = current_gains(model, k, params.values)
-    scale = np.stack([g_h, g_c], axis=-1) * sigma0
-    a = (phi + psi @ params.values) / scale
-    b = -(w @ params.values) / scale
-    ok = np.isfinite(a).all(axis=1) & np.isfinite(b).all(axis=1)
-    a, b = a[ok], b[ok]
-    m_hat = float(np.sum(a * b) / np.sum(a * a))
+    ce = CurrentEquations(model, k)
+    a, b = ce.payload_equations(params.values)
+    sig = (noise_sigma(params.current_noise, ce.currents(), ce.acc) if params.current_noise
+           else np.broadcast_to(sigma0, a.shape))
+    ok = np.isfinite(a).all(axis=1) & np.isfinite(b).all(axis=1) & np.isfinite(sig).all(axis=1)
+    a, b, sig = a[ok], b[ok], sig[ok]
+    aw, bw = a / sig, b / sig
+    m_hat = float(np.sum(aw * bw) / np.sum(aw * aw))
     m = p.payload_kg if p.verified else m_hat
-    e = m * a - b
+    e = (m * a - b) / sigma0
     # How far the calibration's own uncertainty moves this estimate (as the engine's
-    # param_std_kg): m = sum(a b) / sum(a a), and b moves with the parameters.
-    db = -(w[ok] + m_hat * psi[ok]) / scale[ok][:, :, None]
-    g = np.einsum("ke,kep->p", a, db) / np.sum(a * a)
+    # param_std_kg): m = sum(a b w) / sum(a a w), and the residual moves with p.
+    jac = ce.jacobian(params.values, m_hat)[ok] / sig[:, :, None]
+    g = -np.einsum("ke,kep->p", aw, jac) / np.sum(aw * aw)
     cal = math.sqrt(max(0.0, float(g @ params.cov @ g)))
     return PassScore(float(np.mean(np.sum(e * e, axis=1))), m_hat, int(ok.sum()), cal)
 

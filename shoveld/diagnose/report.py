@@ -31,6 +31,23 @@ def _derived(p: ModelParams) -> dict[str, float]:
     return out
 
 
+def findings(p: ModelParams, found: list[str]) -> dict[str, list[dict[str, Any]]]:
+    """Per named cause, the physical values it found, each with its uncertainty."""
+    out: dict[str, list[dict[str, Any]]] = {}
+    for t in p.model().terms:
+        if t.name in found and hasattr(t, "findings"):
+            out[t.name] = [{**f, "value": round(float(f["value"]), 5),
+                            "std": round(float(f["std"]), 5)}
+                           for f in t.findings(p.names, p.values, p.cov)]
+    return out
+
+
+def finding_text(f: dict[str, Any]) -> str:
+    """'load centre of gravity ...: 0.62 +- 0.08 m'."""
+    unit = f" {f['unit']}" if f["unit"] else ""
+    return f"{f['what']}: {f['value']:.3g} ± {f['std']:.2g}{unit}"
+
+
 def cause(name: str) -> str:
     cls = TERMS[name]
     return str(getattr(cls, "cause", "") or cls.description)
@@ -43,6 +60,7 @@ def as_json(d: Diagnosis) -> dict[str, Any]:
     out: dict[str, Any] = {
         "found": d.found,
         "causes": {n: cause(n) for n in d.found},
+        "physical": findings(d.extended_params, d.found),
         "ranked": [c.as_dict() for c in first],
         "steps": [{"model": s.model, "chosen": s.chosen,
                    "candidates": [c.as_dict() for c in s.candidates]} for s in sel.steps],
@@ -227,6 +245,8 @@ def write_report(d: Diagnosis, out_dir: str | Path) -> Path:
     if d.found:
         for i, n in enumerate(d.found, 1):
             lines.append(f"{i}. **{cause(n)}** (model term `{n}`).")
+            for f in js["physical"].get(n, []):
+                lines.append(f"   - {finding_text(f)}")
         lines.append("")
         lines.append(
             f"With {'this' if len(d.found) == 1 else 'these'} in the model, the payload error "

@@ -12,6 +12,11 @@ one-sided t statistic. A candidate is significant when
   model's own approximations, e.g. its friction smoothing and the noise of the
   differentiated rates, are of about 1 % on simulated data without any hidden
   effect, and an extension smaller than that is not a finding);
+* it pays for itself on the payload: over the verified held-out passes, the squared
+  payload errors fall, by a paired one-sided test at ``payload_alpha`` (a term that
+  fits the residual a little better but leaves the payload where it was is not named;
+  on realistic machines the base model's own approximations leave a few percent of
+  structured residual that a flexible term can always take);
 * (optionally) it does not make the payload of the verified held-out passes worse by
   more than a multiple of the payload uncertainty of its own calibration.
 
@@ -39,6 +44,9 @@ class SelectionConfig:
     min_gain: float = 0.02
     """Smallest relative reduction of the held-out residual that counts as a finding."""
     max_effects: int = 3
+    payload_alpha: float = 0.05
+    """A candidate must cut the verified held-out passes' squared payload errors at this
+    one-sided significance (1.0: no payload test)."""
     payload_tolerance: float = math.inf
     """If finite, a candidate may not raise the held-out payload RMS error by more than
     this many times the payload uncertainty its own calibration implies. Off by
@@ -95,6 +103,16 @@ def _rms(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(x * x))) if len(x) else math.nan
 
 
+def _pays(e0: np.ndarray, e1: np.ndarray, alpha: float) -> bool:
+    """Do the squared payload errors fall, pass by pass (paired one-sided t test)?"""
+    d = e0**2 - e1**2
+    sd = float(d.std(ddof=1))
+    if sd == 0.0:
+        return bool(d.mean() > 0)
+    t = float(d.mean() / (sd / math.sqrt(len(d))))
+    return t > float(stats.t.ppf(1.0 - alpha, len(d) - 1))
+
+
 def compare(dataset: DataSet, cur: Evaluation, cand: Evaluation, name: str, n_tried: int,
             cfg: SelectionConfig) -> CandidateScore:
     """Score ``cand`` against ``cur`` on the passes both could judge."""
@@ -126,6 +144,9 @@ def compare(dataset: DataSet, cur: Evaluation, cand: Evaluation, name: str, n_tr
         why = f"not significant (t {t:.2f} <= {t_crit:.2f})"
     elif not (gain >= cfg.min_gain):
         why = f"too small ({100 * gain:.1f} % < {100 * cfg.min_gain:.0f} % of the residual)"
+    elif len(e0) > 2 and cfg.payload_alpha < 1.0 and not _pays(e0, e1, cfg.payload_alpha):
+        why = (f"does not pay on the payload (held-out RMS {_rms(e0):.0f} -> {_rms(e1):.0f} kg"
+               f" over {len(e0)} verified passes)")
     elif len(e0) and worse > cfg.payload_tolerance * cal:
         why = (f"does not pay (held-out payload RMS {worse:+.0f} kg, more than "
                f"{cfg.payload_tolerance:g} x its calibration uncertainty {cal:.0f} kg)")

@@ -57,7 +57,9 @@ def _noise_model(r: np.ndarray, reg: np.ndarray) -> np.ndarray:
 
     scale = np.linalg.norm(reg, axis=0)
     scale[scale == 0] = 1.0
-    coef, _ = nnls(reg / scale, r * r)
+    # the same problem on the QR factor: 4 x 4 instead of N x 4
+    q, rr = np.linalg.qr(reg / scale)
+    coef, _ = nnls(rr, q.T @ (r * r))
     coef = coef / scale
     coef[0] = max(coef[0], 1e-6)
     return coef
@@ -99,7 +101,8 @@ def fit_output(model: Model, kins: list[Kinematics], payloads: list[np.ndarray],
             jw = np.where(np.isfinite(jw), jw, 0.0).reshape(-1, n_p)
             scale = np.linalg.norm(jw, axis=0)
             scale[scale == 0] = 1.0
-            step = np.linalg.lstsq(jw / scale, -rw.reshape(-1), rcond=None)[0] / scale
+            jn = jw / scale
+            step = np.linalg.lstsq(jn.T @ jn, -(jn.T @ rw.reshape(-1)), rcond=None)[0] / scale
             cost = float(np.sum(rw * rw))
             lam = 1.0
             while lam > 1e-4:
@@ -108,7 +111,7 @@ def fit_output(model: Model, kins: list[Kinematics], payloads: list[np.ndarray],
                     break
                 lam *= 0.5
             p = p + lam * step
-            if np.max(np.abs(lam * step) / (np.abs(p) + 1e-9)) < 1e-8:
+            if np.max(np.abs(lam * step) / (np.abs(p) + 1e-9)) < 1e-6:
                 break
         r = ce.residual(p, m)
         good = ok & np.isfinite(r)
@@ -118,7 +121,7 @@ def fit_output(model: Model, kins: list[Kinematics], payloads: list[np.ndarray],
             coef = _noise_model(r[good[:, j], j], reg[good[:, j], j])
             noise[ch] = {k: math.sqrt(c) for k, c in zip(NOISE_KEYS, coef, strict=False)}
             new[:, j] = np.sqrt(reg[:, j] @ coef)
-        if np.max(np.abs(new[good] - sig[good]) / sig[good]) < 0.01:
+        if np.max(np.abs(new[good] - sig[good]) / sig[good]) < 0.03:
             sig = new
             break
         sig = new

@@ -119,6 +119,34 @@ class ExtensionTerm(Term):
         """Physical quantities implied by the identified parameters (for the report)."""
         return {}
 
+    def quantities(self) -> list[tuple[str, str, Callable[[dict[str, float]], float]]]:
+        """(what, unit, value from the identified parameters): the physical values a field
+        engineer can check against the machine (``findings`` adds their uncertainty)."""
+        return []
+
+    def findings(self, names: list[str], values: np.ndarray, cov: np.ndarray
+                 ) -> list[dict[str, Any]]:
+        """Each of ``quantities`` with its standard deviation by the delta method (a
+        numerical gradient through the parameters' covariance), and each searched
+        hyper-parameter with the resolution of its search."""
+        out: list[dict[str, Any]] = []
+        base = dict(zip(names, (float(v) for v in values), strict=True))
+        for what, unit, fn in self.quantities():
+            v0 = fn(base)
+            grad = np.zeros(len(names))
+            for j, n in enumerate(names):
+                h = 1e-6 * max(abs(base[n]), 1e-3)
+                grad[j] = (fn({**base, n: base[n] + h}) - v0) / h
+            std = math.sqrt(max(0.0, float(grad @ cov @ grad)))
+            out.append({"what": what, "value": v0, "std": std, "unit": unit})
+        for what, unit, value, std in self.searched():
+            out.append({"what": what, "value": value, "std": std, "unit": unit})
+        return out
+
+    def searched(self) -> list[tuple[str, str, float, float]]:
+        """(what, unit, value, resolution) of hyper-parameters found by a search."""
+        return []
+
 
 @register_term
 class HoistFieldWeakening(ExtensionTerm):
@@ -157,6 +185,10 @@ class HoistFieldWeakening(ExtensionTerm):
     def derived(self, values: dict[str, float]) -> dict[str, float]:
         return {"flux slope d(K_H/K_H0)/d(i_f/i_f0)": values["K_Hf1"] / values["K_H"]}
 
+    def quantities(self) -> list[tuple[str, str, Callable[[dict[str, float]], float]]]:
+        return [("hoist pull per ampere change per unit of relative field", "",
+                 lambda v: v["K_Hf1"] / v["K_H"])]
+
 
 @register_term
 class SwingCentrifugal(ExtensionTerm):
@@ -186,6 +218,10 @@ class SwingCentrifugal(ExtensionTerm):
 
     def _w2(self, k: Kinematics) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return k.swing_rate**2, np.cos(k.th), np.sin(k.th)
+
+    def searched(self) -> list[tuple[str, str, float, float]]:
+        return [("swing axis to shipper shaft (radius of the arm's turn)", "m",
+                 self.h("R0_m"), self.search_tol["R0_m"])]
 
     def columns(self, k: Kinematics) -> np.ndarray:
         w2, c, s = self._w2(k)
@@ -316,6 +352,13 @@ class SensorTimeSkew(ExtensionTerm):
     def columns(self, k: Kinematics) -> np.ndarray:
         return np.zeros((len(k), 2, 0))
 
+    def searched(self) -> list[tuple[str, str, float, float]]:
+        d = self.h("delay_s")
+        what = ("arm-geometry stream late against the currents" if d >= 0
+                else "current stream late against the arm geometry")
+        # the search walks whole samples: half a sample is its resolution
+        return [(what, "s", abs(d), 0.01)]
+
     def _late(self) -> tuple[tuple[str, ...], float]:
         d = self.h("delay_s")
         return (DRIVE_STREAM, d) if d >= 0 else (ARM_STREAM, -d)
@@ -416,6 +459,12 @@ class PayloadCogOffset(ExtensionTerm):
         z = np.zeros_like(k.d)
         return _stack((z, z), (z, z))
 
+    def quantities(self) -> list[tuple[str, str, Callable[[dict[str, float]], float]]]:
+        return [("load centre of gravity in front of the bail (along the handle)", "m",
+                 lambda v: v["cog_fwd"]),
+                ("load centre of gravity below the bail (across the handle)", "m",
+                 lambda v: -v["cog_up"])]
+
     def payload_columns(self, k: Kinematics) -> np.ndarray:
         c, s = np.cos(k.th), np.sin(k.th)
         fwd = (2.0 * k.d * k.thdd + 2.0 * k.dd * k.thd + G * c, -k.thd * k.thd)
@@ -442,6 +491,9 @@ class HoistRopeMass(ExtensionTerm):
              "is carried by the hoist")
     signature = "rope_length"
     static_params = ("rope_kg_m", "rope_T0")
+
+    def quantities(self) -> list[tuple[str, str, Callable[[dict[str, float]], float]]]:
+        return [("hoist rope mass (both ropes)", "kg/m", lambda v: v["rope_kg_m"])]
 
     def columns(self, k: Kinematics) -> np.ndarray:
         u_th, u_d = _unit_hoist(k)
@@ -473,6 +525,12 @@ class LoadDependentFriction(ExtensionTerm):
     def columns(self, k: Kinematics) -> np.ndarray:
         z = np.zeros_like(k.d)
         return _stack((z, z), (z, z))
+
+    def quantities(self) -> list[tuple[str, str, Callable[[dict[str, float]], float]]]:
+        return [("shipper-shaft friction per tonne of load", "N m/t",
+                 lambda v: 1000.0 * v["fc3_kg"]),
+                ("saddle-block friction per tonne of load", "N/t",
+                 lambda v: 1000.0 * v["fc4_kg"])]
 
     def payload_columns(self, k: Kinematics) -> np.ndarray:
         z = np.zeros_like(k.d)
@@ -524,6 +582,11 @@ class CurrentSaturation(ExtensionTerm):
         return {"hoist force deficit at the reference current":
                 values["K_H3"] / values["K_H"]}
 
+    def quantities(self) -> list[tuple[str, str, Callable[[dict[str, float]], float]]]:
+        ref = self.h("ref_a")
+        return [(f"hoist pull short of linear at {ref:g} A", "%",
+                 lambda v: 100.0 * v["K_H3"] / v["K_H"])]
+
 
 @register_term
 class GroundSlope(ExtensionTerm):
@@ -567,6 +630,10 @@ class GroundSlope(ExtensionTerm):
     def derived(self, values: dict[str, float]) -> dict[str, float]:
         return {"kappa (1 for a true slope)": values["K_H_pitch"] / values["K_H"]}
 
+    def quantities(self) -> list[tuple[str, str, Callable[[dict[str, float]], float]]]:
+        return [("boom tilt per degree of deck pitch (1 for a machine on a slope)", "",
+                 lambda v: v["K_H_pitch"] / v["K_H"])]
+
 
 @register_term
 class BoomSuspensionSpring(ExtensionTerm):
@@ -597,9 +664,17 @@ class BoomSuspensionSpring(ExtensionTerm):
         return {"boom drop at the reference current, deg":
                 math.degrees(values["K_H_sag"] / values["K_H"])}
 
+    def quantities(self) -> list[tuple[str, str, Callable[[dict[str, float]], float]]]:
+        ref = self.h("ref_a")
+        return [(f"boom point drop at {ref:g} A of hoist current", "deg",
+                 lambda v: math.degrees(v["K_H_sag"] / v["K_H"]))]
+
 
 EFFECT_TERMS: tuple[str, ...] = (
-    "hoist_field_weakening", "swing_centrifugal", "sensor_time_skew", "payload_cog_offset",
+    "swing_centrifugal", "sensor_time_skew", "payload_cog_offset",
     "hoist_rope_mass", "load_dependent_friction", "current_saturation", "ground_slope",
     "boom_suspension_spring")
-"""The candidate library of the diagnosis, in a fixed order."""
+"""The candidate library of the diagnosis, in a fixed order. ``hoist_field_weakening``
+is no longer in it: the base model's hoist drive carries K_H over the field current
+(``shoveld.model.terms.HoistDrive``), so a drive that forces or weakens its field is
+modelled, not diagnosed."""

@@ -1,0 +1,129 @@
+"""The realistic simulated machine, and the identification's statistics on it.
+
+A simulator that shares the model's assumptions always fits it; these tests hold the
+estimator to what real transducers and drives do (``shoveld.sim.machine``): offsets
+and gain errors, a 12-bit ADC, noise growing with the reading, a wandering hoist
+split, a drifting handle sensor and a hoist field weakened above base speed. The full
+statistics over many machines are ``bench/payload_accuracy.py``'s; here at a size CI
+can afford.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from shoveld.engine.offline import estimate_table
+from shoveld.identify.calibrate import Calibrator
+from shoveld.model.params import ModelParams
+from shoveld.sim.machine import Channel, FieldDrive, Machine
+from shoveld.sim.scenario import SimResult, simulate_calibration, simulate_cycles
+from tests.engine.test_calibrate import machine_truth
+
+N_MACHINES = 20
+"""Machines drawn for the coverage test: the issue's "at least 20" (the bench uses 24
+others)."""
+
+
+def test_a_channel_reads_like_a_hall_transducer_on_a_12_bit_adc() -> None:
+    ch = Channel(offset_a=3.0, gain=0.004, noise_a=2.5, noise_rel=0.002, bits=12)
+    rng = np.random.default_rng(0)
+    x = np.full(20000, 500.0)
+    y = ch.read(x, rng)
+    lsb = 8000.0 / 4096
+    assert np.allclose(y / lsb, np.round(y / lsb))
+    assert np.mean(y) == pytest.approx(500 * 1.004 + 3.0, abs=0.1)
+    assert np.std(y) == pytest.approx(np.hypot(2.5, 1.0), rel=0.05)
+    assert ch.read(np.array([9000.0]), rng)[0] < 4000.0  # the ADC clips
+
+
+def test_the_drive_weakens_the_field_above_base_speed_both_ways() -> None:
+    fd = FieldDrive(hoist_base_m_s=1.7, lower_base_m_s=0.9)
+    target = fd.field_target(np.array([0.0, -1.0, -2.4, 0.5, 1.8, 5.0]))
+    assert target[0] == target[1] == target[3] == pytest.approx(70.0)
+    assert 30.0 < target[2] < 65.0  # hoisting at 1.4 x base speed
+    assert 30.0 <= target[4] < 65.0 and target[5] == pytest.approx(30.0)
+    assert fd.flux_ratio(fd.field_for(np.array([0.5])))[0] == pytest.approx(0.5)
+
+
+def test_seeds_draw_machines_and_files_of_one_machine_share_its_sensors() -> None:
+    a, b = Machine.draw(1), Machine.draw(2)
+    assert a.sensors.hoist1.offset_a != b.sensors.hoist1.offset_a
+    assert a.plant.Md != b.plant.Md
+    assert Machine.draw(1) == a
+    cal = simulate_calibration(0.0, seed=5, machine=a, n_poses=4, free_motion_s=10,
+                               fast_moves=0)
+    assert cal.table.meta["shovel"] == "sim-ph2100-m1"
+    assert cal.truth["machine"]["identified_truth"]["i_H0"] == pytest.approx(
+        a.sensors.hoist1.offset_a + a.sensors.hoist2.offset_a)
+
+
+@pytest.fixture(scope="module")
+def machine_runs() -> list[tuple[Machine, ModelParams]]:
+    out = []
+    for seed in range(301, 301 + N_MACHINES):
+        m = Machine.draw(seed)
+        cal = Calibrator().fit([simulate_calibration(0.0, seed=10 * seed, machine=m).table,
+                                simulate_calibration(8420.0, seed=10 * seed + 1,
+                                                     machine=m).table])
+        assert cal.params_ is not None
+        out.append((m, cal.params_))
+    return out
+
+
+PAYLOAD_PARAMS = ("Md", "MdLc", "K_H", "K_C", "i_H0")
+"""What the payload rests on: gravity, the force constants at the nominal field, the
+offsets."""
+
+
+@pytest.mark.parametrize("name", PAYLOAD_PARAMS)
+def test_standard_errors_are_honest_over_machines(
+        machine_runs: list[tuple[Machine, ModelParams]], name: str) -> None:
+    """The true value within 2 standard errors in at least 90 % of the machines, and the
+    mean error under half the mean standard error."""
+    errs, ses = [], []
+    for m, p in machine_runs:
+        tr = machine_truth(m, p)
+        errs.append(p.get(name) - tr[name])
+        ses.append(float(p.stderr[p.names.index(name)]))
+    e, se = np.array(errs), np.array(ses)
+    assert np.mean(np.abs(e) <= 2 * se) >= 0.9, (name, e / se)
+    assert abs(e.mean()) < 0.5 * se.mean(), (name, e.mean(), se.mean())
+
+
+@pytest.mark.xfail(strict=True, reason="known: J is biased ~+3 % by the 0.5 s Savitzky-Golay "
+                   "fit of fast strokes, friction by errors in the estimated rates, the crowd "
+                   "offset by ~0.03 A against a 0.04 A standard error; see docs/engine.md")
+@pytest.mark.parametrize("name", ("J", "fv4", "fc4", "i_C0"))
+def test_dynamic_parameters_are_not_yet_unbiased(
+        machine_runs: list[tuple[Machine, ModelParams]], name: str) -> None:
+    e = np.array([p.get(name) - machine_truth(m, p)[name] for m, p in machine_runs])
+    se = np.array([float(p.stderr[p.names.index(name)]) for _, p in machine_runs])
+    assert abs(e.mean()) < 0.5 * se.mean()
+
+
+@pytest.fixture(scope="module")
+def fast_lifts(machine_runs: list[tuple[Machine, ModelParams]]
+               ) -> tuple[SimResult, ModelParams]:
+    m, p = machine_runs[0]
+    return simulate_cycles(12, seed=909, machine=m, payload_range=(3000.0, 35000.0),
+                           truck_target_kg=None), p
+
+
+def test_every_pass_has_a_payload_when_the_field_weakens(
+        fast_lifts: tuple[SimResult, ModelParams]) -> None:
+    """Fast lifts run on a weakened hoist field; no pass may lose its payload for it."""
+    res, p = fast_lifts
+    t, field = res.table.time, res.table.columns["hoist_field_a"]
+    weak = [tp for tp in res.passes if np.nanmin(
+        field[(t >= tp.phases["lift"][0]) & (t < tp.phases["swing"][0])]) < 60.0]
+    assert len(weak) >= 3  # the scenario really weakens the field
+    est = estimate_table(res.table, p)
+    assert len(est.passes) == len(res.passes) and all(q.valid for q in est.passes)
+    err = np.array([q.payload_kg - tp.payload_kg for q, tp in zip(est.passes, res.passes,
+                                                                   strict=True)])
+    std = np.array([q.std_kg for q in est.passes])
+    crb = np.array([tp.crb_kg for tp in res.passes])
+    assert np.all(np.abs(err) < 4 * std)
+    assert np.all((crb > 10) & (crb < 200))  # "a few tens of kg" per pass
+    assert np.sqrt(np.mean(err**2)) < 3 * crb.mean()
