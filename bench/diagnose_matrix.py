@@ -43,7 +43,7 @@ def simulate(spec: dict[str, float], seed: int, passes: int, ideal: bool = False
     from shoveld.sim.scenario import simulate_calibration, simulate_cycles
 
     def fx() -> list[Any]:
-        return make_effects(dict(spec))
+        return make_effects(dict(spec), form="bench")
 
     base = 1000 * seed
     machine = Machine.ideal() if ideal else Machine.draw(base)

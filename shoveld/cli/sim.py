@@ -66,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.out:
         raise CliError("--out FILE is required")
     try:
-        effects = fx.make_effects(parse_effect_args(args.effect))
+        effects = fx.make_effects(parse_effect_args(args.effect), form="bench")
     except ValueError as e:
         raise CliError(str(e)) from None
     machine = Machine.ideal() if args.ideal else Machine.draw(args.machine)

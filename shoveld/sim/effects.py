@@ -35,8 +35,17 @@ class SimEffect:
     and large enough to matter for the payload (below it the diagnosis may, honestly,
     find nothing; see docs/diagnosis.md for the detection limits)."""
 
-    def __init__(self, magnitude: float | None = None) -> None:
+    forms: ClassVar[tuple[str, ...]] = ("",)
+    """The physical forms the effect can take. The first is the simple one the tests
+    hide; the bench hides the last (``make_effects(form="bench")``), written another
+    way, so that a model term is shown to find the physics and not its twin."""
+
+    def __init__(self, magnitude: float | None = None, form: str | None = None) -> None:
         self.magnitude = self.default_magnitude if magnitude is None else float(magnitude)
+        self.form = self.forms[0] if form is None else form
+        if self.form not in self.forms:
+            raise ValueError(f"sim effect {self.name!r} has no form {form!r}; "
+                             f"known: {self.forms}")
 
     def before_dynamics(self, ctx: dict[str, Any]) -> None:
         """May set ctx['boom_true'] or ctx['gravity'] ((N,2) or (2,)) before dynamics."""
@@ -62,12 +71,19 @@ class SimEffect:
         """May change the measured columns (sensor effects), in place."""
 
 
-def make_effects(spec: dict[str, float | None]) -> list[SimEffect]:
-    """Effects from {name: magnitude or None for the default}."""
+def make_effects(spec: dict[str, float | None], form: str = "test") -> list[SimEffect]:
+    """Effects from {name: magnitude or None for the default}; ``form`` "test" takes each
+    effect's simple form, "bench" its other one (see ``SimEffect.forms``)."""
     unknown = [n for n in spec if n not in SIM_EFFECTS]
     if unknown:
         raise ValueError(f"unknown sim effect(s) {unknown}; known: {sorted(SIM_EFFECTS)}")
-    return [SIM_EFFECTS[n](m) for n, m in spec.items()]
+    if form not in ("test", "bench"):
+        raise ValueError(f"form must be 'test' or 'bench', not {form!r}")
+    out = []
+    for n, m in spec.items():
+        cls = SIM_EFFECTS[n]
+        out.append(cls(m, cls.forms[0] if form == "test" else cls.forms[-1]))
+    return out
 
 
 # ---------------------------------------------------------------------------------------
@@ -212,6 +228,10 @@ class SensorTimeSkewEffect(SimEffect):
     magnitude_unit = "ms (arm sensor late; negative: currents late)"
     description = "one sensor stream delayed against the others"
     typical_range = (140.0, 220.0)
+    forms = ("arm", "mti")
+    """arm: the MTi and the laser late together; mti: only the MTi (handle and swing)
+    is late, the laser's crowd reading is on time (one device's stream, as a buffered
+    serial link or a CAN gateway makes it)."""
 
     def measure(self, cols: dict[str, np.ndarray], ctx: dict[str, Any],
                 rng: np.random.Generator) -> None:
@@ -219,9 +239,11 @@ class SensorTimeSkewEffect(SimEffect):
         tau = self.magnitude / 1000.0
         t = cols["time_s"]
         if tau >= 0:
-            for name, truth, conv in (("handle_deg", m.th, np.degrees),
-                                      ("crowd_m", m.d, lambda x: x),
-                                      ("swing_deg", m.swing, np.degrees)):
+            late_ones = [("handle_deg", m.th, np.degrees), ("crowd_m", m.d, lambda x: x),
+                         ("swing_deg", m.swing, np.degrees)]
+            if self.form == "mti":
+                late_ones = [late_ones[0], late_ones[2]]
+            for name, truth, conv in late_ones:
                 late = np.interp(t - tau, m.t, truth)
                 cols[name] = cols[name] + conv(late) - conv(np.interp(t, m.t, truth))
         else:
@@ -245,18 +267,45 @@ class PayloadCogOffsetEffect(SimEffect):
     description = "payload centre of gravity away from the bail"
     typical_range = (0.5, 1.5)
     angle_deg = -35.0
+    forms = ("point", "heap")
+    """point: the load as one mass at its centre; heap: the material where it sits in
+    the dipper, a heap over the dipper's floor (point masses on a grid of the bowl,
+    heavier towards the back wall), with its own extent and inertia."""
+
+    def _heap(self) -> list[tuple[float, float, float]]:
+        """(share, along the handle, across it) of the heap's parts, in the dipper's frame.
+        The bowl spans 0.3-1.7 x ``magnitude`` forward of the bail and 0.1-1.1 x below
+        it; the fill is deeper at the back (a heap leans on the back wall)."""
+        r = self.magnitude
+        pts = []
+        for u in np.linspace(0.3, 1.7, 6):
+            for v in np.linspace(0.1, 1.1, 5):
+                w = (1.8 - u) * (1.2 - v)
+                pts.append((w, u * r * np.cos(np.radians(self.angle_deg)) + 0.2 * r,
+                            -v * r * np.sin(np.radians(-self.angle_deg))))
+        total = sum(p[0] for p in pts)
+        return [(w / total, a, b) for w, a, b in pts]
 
     def bodies(self, ctx: dict[str, Any]) -> None:
-        a = self.magnitude * np.cos(np.radians(self.angle_deg))
-        b = self.magnitude * np.sin(np.radians(self.angle_deg))
+        from shoveld.sim.plant import Body
 
-        def load_pos(th: np.ndarray, d: np.ndarray, boom: np.ndarray) -> np.ndarray:
-            c, s = np.cos(th), np.sin(th)
-            return np.stack([(d + a) * c - b * s, (d + a) * s + b * c], axis=-1)
+        def place(a: float, b: float) -> Any:
+            def load_pos(th: np.ndarray, d: np.ndarray, boom: np.ndarray) -> np.ndarray:
+                c, s = np.cos(th), np.sin(th)
+                return np.stack([(d + a) * c - b * s, (d + a) * s + b * c], axis=-1)
+            return load_pos
 
-        for body in ctx["bodies"]:
-            if body.name == "payload":
-                body.position = load_pos
+        if self.form == "point":
+            a = self.magnitude * np.cos(np.radians(self.angle_deg))
+            b = self.magnitude * np.sin(np.radians(self.angle_deg))
+            for body in ctx["bodies"]:
+                if body.name == "payload":
+                    body.position = place(a, b)
+            return
+        old = next(bd for bd in ctx["bodies"] if bd.name == "payload")
+        ctx["bodies"] = [bd for bd in ctx["bodies"] if bd is not old]
+        for k, (w, a, b) in enumerate(self._heap()):
+            ctx["bodies"].append(Body(f"payload{k}", np.asarray(old.mass) * w, place(a, b)))
 
 
 @register_effect
@@ -361,6 +410,22 @@ class CurrentSaturationEffect(SimEffect):
     description = "force sub-linear in armature current"
     typical_range = (0.1, 0.15)
     ref_a = 250.0
+    forms = ("asinh", "knee")
+    """asinh: a smooth curve; knee: linear up to a knee at 100 A per motor, a reduced slope
+    above it (the pole tips saturating), rounded over 20 A."""
+    knee_a = 100.0
+
+    def _force(self, i: np.ndarray, i_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """Force per unit of the linear constant, and its derivative, at current i."""
+        if self.form == "asinh":
+            return i_s * np.arcsinh(i / i_s), 1.0 / np.sqrt(1.0 + (i / i_s) ** 2)
+        k, w = self.knee_a, 20.0
+        slope = 1.0 - self.magnitude * self.ref_a / (self.ref_a - k)
+        x = np.abs(i) - k
+        soft = w * np.logaddexp(0.0, x / w)  # smooth max(0, |i| - knee)
+        f = np.sign(i) * (np.abs(i) - (1.0 - slope) * soft)
+        df = 1.0 - (1.0 - slope) / (1.0 + np.exp(-x / w))
+        return f, df
 
     def _i_sat(self) -> float:
         from scipy.optimize import brentq
@@ -379,8 +444,9 @@ class CurrentSaturationEffect(SimEffect):
             lin = ctx[key]  # the current a linear motor would need
             i = lin.copy()
             for _ in range(50):
-                f = sum(i_s * np.arcsinh(sh * i / i_s) for sh in shares) - lin
-                df = sum(sh / np.sqrt(1.0 + (sh * i / i_s) ** 2) for sh in shares)
+                parts = [self._force(sh * i, i_s) for sh in shares]
+                f = sum(p[0] for p in parts) - lin
+                df = sum(sh * p[1] for sh, p in zip(shares, parts, strict=True))
                 step = f / df
                 i = i - step
                 if np.max(np.abs(step)) < 1e-9:
@@ -407,7 +473,12 @@ class GroundSlopeEffect(SimEffect):
     magnitude_unit = "deg (ground slope)"
     description = "machine on a slope, inclinometer sees it"
     typical_range = (4.0, 7.0)
-    downhill_deg = 40.0
+    forms = ("downhill_40", "downhill_205")
+    """The swing angle the ground falls towards (the truck on the low side or the high)."""
+
+    @property
+    def downhill_deg(self) -> float:
+        return float(self.form.split("_")[1])
 
     def _tilt(self, swing: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """House pitch and roll (rad), and the deck's tilt in the arm plane seen from the
