@@ -28,12 +28,9 @@ from typing import Any
 
 import numpy as np
 
+from shoveld.diagnose.core import MODELLED_BY_BASE
+
 RATED = 35000.0
-
-
-MODELLED_BY_BASE = {"hoist_field_weakening"}
-"""Sim effects the base model now carries (K_H over the field current): the right
-diagnosis names nothing, and the base payload is already good."""
 
 
 def simulate(spec: dict[str, float], seed: int, passes: int, ideal: bool = False

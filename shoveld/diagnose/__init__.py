@@ -6,6 +6,6 @@ measured operating data, tries each named physical extension of the model
 pay one at a time, and reports the gain on the verified passes.
 """
 
-from shoveld.diagnose.core import Diagnosis, diagnose
+from shoveld.diagnose.core import MODELLED_BY_BASE, Diagnosis, diagnose
 
-__all__ = ["Diagnosis", "diagnose"]
+__all__ = ["MODELLED_BY_BASE", "Diagnosis", "diagnose"]

@@ -19,6 +19,10 @@ from shoveld.model.params import ModelParams
 from shoveld.model.terms import TERMS
 from shoveld.signals.table import SignalsTable
 
+MODELLED_BY_BASE: dict[str, str] = {"hoist_field_weakening": "hoist_drive"}
+"""Simulated effects the base model itself carries, and the term that does: the right
+diagnosis of data with one of them names nothing."""
+
 
 @dataclass
 class Diagnosis:
