@@ -48,6 +48,18 @@ def format_report(params: object) -> str:
         rel = abs(se / v) * 100 if v else math.inf
         lines.append(f"{n:10s} {v:14.6g} {se:12.4g} {rel:6.2f}%  {u}")
     lines.append("")
+    knots = params.hyper.get("hoist_drive", {})
+    if knots.get("field_knots_a"):
+        lines.append(f"hoist pull per ampere over the field: knots at "
+                     f"{', '.join(f'{k:g}' for k in sorted(knots['field_knots_a']))} A, "
+                     f"nominal {knots['field_nominal_a']:g} A (K_H)")
+    if "current_residual_rms_a" in fit:
+        lines.append("residual current RMS: " + ", ".join(
+            f"{k} {v:.3g} A" for k, v in fit["current_residual_rms_a"].items()))
+        for ch, n in params.current_noise.items():
+            lines.append(f"  noise model {ch}: {n['floor_a']:.3g} A + {100 * n['rel']:.2g} % of "
+                         f"the reading, correlation time {n['tau']:.1f} samples")
+        lines.append(f"standard errors: {fit['covariance']}")
     lines.append("residual RMS: " + ", ".join(
         f"{k} {v:.4g} {'N m' if k == 'handle' else 'N'}" for k, v in fit["residual_rms"].items()))
     for name, st in fit.get("stages", {}).items():
