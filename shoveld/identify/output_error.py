@@ -127,7 +127,8 @@ def fit_output(model: Model, kins: list[Kinematics], payloads: list[np.ndarray],
         sig = new
 
     rw, w = weighted(p, sig)
-    jw = np.where(np.isfinite(ce.jacobian(p, m)), ce.jacobian(p, m), 0.0) * w[:, :, None]
+    jac = ce.jacobian(p, m)
+    jw = np.where(np.isfinite(jac), jac, 0.0) * w[:, :, None]
     jac_rows = jw.reshape(-1, n_p)
     h = jac_rows.T @ jac_rows
     h_inv = np.linalg.pinv(h)
@@ -156,8 +157,8 @@ def fit_output(model: Model, kins: list[Kinematics], payloads: list[np.ndarray],
                 taus.append(integrated_autocorrelation(zz))
                 lens.append(len(zz))
         noise[ch]["tau"] = float(np.average(taus, weights=lens)) if taus else 1.0
-    g_h = ce.dh[:, 0, :] @ p
-    g_c = ce.dc[:, 1, :] @ p
+    g_h = ce.dh0 @ p
+    g_c = ce.dc1 @ p
     norms = np.linalg.norm(jac_rows, axis=0)
     sv = np.linalg.svd(jac_rows / np.where(norms > 0, norms, 1.0), compute_uv=False)
     return OutputFit(

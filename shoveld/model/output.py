@@ -33,22 +33,38 @@ class CurrentEquations:
 
     def __init__(self, model: Model, k: Kinematics) -> None:
         self.model = model
-        self.w, self.phi, self.psi = model.regressor(k)
-        self.dh, self.dc = model.current_derivatives(k)
+        w, phi, psi = model.regressor(k)
+        dh, dc = model.current_derivatives(k)
+        # per equation, contiguous: the fits evaluate these hundreds of times
+        self.w = w
+        self.w0, self.w1 = np.ascontiguousarray(w[:, 0, :]), np.ascontiguousarray(w[:, 1, :])
+        self.phi = phi
+        self.psi = psi
+        self.has_psi = bool(np.any(psi))
+        self.psi0 = np.ascontiguousarray(psi[:, 0, :])
+        self.psi1 = np.ascontiguousarray(psi[:, 1, :])
+        self.dh0 = np.ascontiguousarray(dh[:, 0, :])
+        self.dh1 = np.ascontiguousarray(dh[:, 1, :])
+        self.dc1 = np.ascontiguousarray(dc[:, 1, :])
         self.offsets = model.offset_index
         self.i_h = k.i_h
         self.i_c = k.i_c
         self.acc = np.stack([k.thdd, k.ddd], axis=-1)
+        self._gain_cache: tuple[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
 
     def __len__(self) -> int:
-        return int(self.w.shape[0])
+        return int(self.w0.shape[0])
 
     def _gains(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         # d e_handle / d i_H; the multiple of the handle equation that removes i_H from
         # the crowd equation; d e_crowd / d i_C
-        g_h = self.dh[:, 0, :] @ p
-        c = -(self.dh[:, 1, :] @ p) / g_h
-        g_c = self.dc[:, 1, :] @ p
+        key = p.tobytes()
+        if self._gain_cache is not None and self._gain_cache[0] == key:
+            return self._gain_cache[1]
+        g_h = self.dh0 @ p
+        c = -(self.dh1 @ p) / g_h
+        g_c = self.dc1 @ p
+        self._gain_cache = (key, (g_h, c, g_c))
         return g_h, c, g_c
 
     def _offsets(self, p: np.ndarray) -> tuple[float, float]:
@@ -59,11 +75,13 @@ class CurrentEquations:
     def payload_equations(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(a, b), each (N, 2) in amps: the residual of a payload m is ``a m - b``."""
         g_h, c, g_c = self._gains(p)
-        e_w = self.w @ p
-        e_m = self.phi + self.psi @ p
+        ew0, ew1 = self.w0 @ p, self.w1 @ p
+        em0, em1 = self.phi[:, 0], self.phi[:, 1]
+        if self.has_psi:
+            em0, em1 = em0 + self.psi0 @ p, em1 + self.psi1 @ p
         o_h, o_c = self._offsets(p)
-        a = np.stack([e_m[:, 0] / g_h, (e_m[:, 1] + c * e_m[:, 0]) / g_c], axis=-1)
-        b = -np.stack([e_w[:, 0] / g_h - o_h, (e_w[:, 1] + c * e_w[:, 0]) / g_c - o_c], axis=-1)
+        a = np.stack([em0 / g_h, (em1 + c * em0) / g_c], axis=-1)
+        b = -np.stack([ew0 / g_h - o_h, (ew1 + c * ew0) / g_c - o_c], axis=-1)
         return a, b
 
     def residual(self, p: np.ndarray, m: np.ndarray | float) -> np.ndarray:
@@ -75,16 +93,21 @@ class CurrentEquations:
     def jacobian(self, p: np.ndarray, m: np.ndarray | float) -> np.ndarray:
         """(N, 2, P): d residual / d p (exact, the model being linear in p per equation)."""
         m = np.broadcast_to(np.asarray(m, dtype=float), (len(self),))
-        a_mat = self.w + m[:, None, None] * self.psi
-        e = a_mat @ p + m[:, None] * self.phi
-        dh0, dh1, dc1 = self.dh[:, 0, :], self.dh[:, 1, :], self.dc[:, 1, :]
+        if self.has_psi:
+            a0 = self.w0 + m[:, None] * self.psi0
+            a1 = self.w1 + m[:, None] * self.psi1
+        else:
+            a0, a1 = self.w0, self.w1
+        e0 = a0 @ p + m * self.phi[:, 0]
+        e1 = a1 @ p + m * self.phi[:, 1]
+        dh0, dh1, dc1 = self.dh0, self.dh1, self.dc1
         g_h, c, g_c = self._gains(p)
-        jac = np.empty_like(a_mat)
-        r_h = e[:, 0] / g_h
-        jac[:, 0, :] = (a_mat[:, 0, :] - r_h[:, None] * dh0) / g_h[:, None]
-        dc_dp = -(dh1 * g_h[:, None] - (dh1 @ p)[:, None] * dh0) / (g_h**2)[:, None]
-        n = e[:, 1] + c * e[:, 0]
-        dn = a_mat[:, 1, :] + c[:, None] * a_mat[:, 0, :] + e[:, 0][:, None] * dc_dp
+        jac = np.empty((len(m), 2, len(p)))
+        r_h = e0 / g_h
+        jac[:, 0, :] = (a0 - r_h[:, None] * dh0) / g_h[:, None]
+        dc_dp = -(dh1 * g_h[:, None] + (c * g_h)[:, None] * dh0) / (g_h**2)[:, None]
+        n = e1 + c * e0
+        dn = a1 + c[:, None] * a0 + e0[:, None] * dc_dp
         jac[:, 1, :] = (dn - (n / g_c)[:, None] * dc1) / g_c[:, None]
         if self.offsets is not None:
             jac[:, 0, self.offsets[0]] -= 1.0
