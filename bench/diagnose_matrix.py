@@ -23,7 +23,7 @@ import itertools
 import json
 import math
 import time
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any
 
 import numpy as np
@@ -88,6 +88,8 @@ def main() -> None:
     ap.add_argument("--passes", type=int, default=24)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--json", help="write all cases to this file")
+    ap.add_argument("--progress", help="append each case to this file (JSON lines) as it "
+                                       "ends, so a long run that is stopped keeps what it did")
     ap.add_argument("--ideal", action="store_true",
                     help="the ideal simulator (the old matrix); default: realistic machines, "
                          "one drawn per case")
@@ -121,7 +123,12 @@ def main() -> None:
     for j in jobs:
         j["ideal"] = bool(args.ideal)
     with ProcessPoolExecutor(args.jobs) as ex:
-        results = list(ex.map(one, jobs))
+        futures = [ex.submit(one, j) for j in jobs]
+        for f in as_completed(futures):
+            if args.progress:
+                with open(args.progress, "a") as out:
+                    out.write(json.dumps(f.result(), default=str) + "\n")
+        results = [f.result() for f in futures]
     print(f"{'ideal simulator' if args.ideal else 'realistic machines'}; effects the base "
           f"model carries ({', '.join(sorted(MODELLED_BY_BASE))}) count as right when "
           "nothing is named")

@@ -482,18 +482,20 @@ class HoistRopeMass(ExtensionTerm):
     Potential energy of a taut rope of mass lam per metre, straight from the sheave B
     to the bail P, with the rope wound in at the drum at height y_D:
     V = lam g l ((y_B + y_P) / 2 - y_D). Its gradient is the generalized force:
-    lam g [dl/dq (y_B + y_P) / 2 + l / 2 dy_P/dq] - (lam g y_D) dl/dq. Linear in lam and
-    in T0 = lam g y_D (a constant rope-tension offset from the drum-side rope).
+    lam g [dl/dq (y_B + y_P) / 2 + l / 2 dy_P/dq] - (lam g y_D) dl/dq. Linear in lam;
+    the last part is a constant rope tension, which the base model's hoist current
+    offset already carries (a second column for it would be the offset's twin and
+    leave both unidentifiable).
     """
 
     name = "hoist_rope_mass"
-    params = ("rope_kg_m", "rope_T0")
-    units = ("kg/m", "N")
+    params = ("rope_kg_m",)
+    units = ("kg/m",)
     description = "weight of the hoist rope"
     cause = ("the hoist rope's own weight between the boom-point sheave and the bail "
              "is carried by the hoist")
     signature = "rope_length"
-    static_params = ("rope_kg_m", "rope_T0")
+    static_params = ("rope_kg_m",)
 
     def quantities(self) -> list[tuple[str, str, Callable[[dict[str, float]], float]]]:
         return [("hoist rope mass (both ropes)", "kg/m", lambda v: v["rope_kg_m"])]
@@ -504,7 +506,7 @@ class HoistRopeMass(ExtensionTerm):
         ymid = 0.5 * (L_BS * np.sin(k.boom) + k.d * s)
         lam = (G * (u_th * ymid + 0.5 * k.l_sd * k.d * np.cos(k.th)),
                G * (u_d * ymid + 0.5 * k.l_sd * s))
-        return _stack(lam, (-u_th, -u_d))
+        return _stack(lam)
 
 
 @register_term
