@@ -8,7 +8,7 @@ from shoveld.cli import CliError
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from shoveld.daemon.config import DEFAULT_CONFIG
+    from shoveld.paths import DEFAULT_CONFIG
 
     p = sub.add_parser(
         "check-config", help="validate the service configuration",

@@ -1,13 +1,23 @@
-"""Helpers shared by subcommands: reading tables and params with one-line errors."""
+"""Helpers shared by subcommands: reading tables and params with one-line errors.
+
+The readers import numpy and the model when called, not when ``shoveld --help`` (which
+imports every subcommand's module to list it) loads this file.
+"""
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from shoveld.cli import CliError
-from shoveld.model.params import ModelParams, ParamsFileError, load_params
-from shoveld.signals.table import SignalsFormatError, SignalsTable, read_table
+
+if TYPE_CHECKING:
+    from shoveld.model.params import ModelParams
+    from shoveld.signals.table import SignalsTable
 
 
 def read_tables(paths: list[str]) -> list[SignalsTable]:
+    from shoveld.signals.table import SignalsFormatError, read_table
+
     out = []
     for p in paths:
         try:
@@ -18,6 +28,8 @@ def read_tables(paths: list[str]) -> list[SignalsTable]:
 
 
 def read_params(path: str) -> ModelParams:
+    from shoveld.model.params import ParamsFileError, load_params
+
     try:
         return load_params(path)
     except ParamsFileError as e:

@@ -13,7 +13,7 @@ log = logging.getLogger("shoveld.run")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from shoveld.daemon.config import DEFAULT_CONFIG
+    from shoveld.paths import DEFAULT_CONFIG
 
     p = sub.add_parser(
         "run", help="run the payload monitor service",

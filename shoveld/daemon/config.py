@@ -22,10 +22,9 @@ from typing import Any
 from shoveld.cycle.phases import PhaseConfig
 from shoveld.engine.loop import NEEDED, EngineConfig
 from shoveld.installation import Installation
+from shoveld.paths import DEFAULT_CONFIG as DEFAULT_CONFIG  # re-exported
 from shoveld.payload.rls import RlsConfig
 from shoveld.sample import SIGNAL_FIELDS
-
-DEFAULT_CONFIG = "/etc/shoveld/shoveld.toml"
 
 MTI_KINDS = ("mti_serial", "mti_can")
 LASER_KINDS = ("ar4000",)
