@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 
 from shoveld.cli import CliError
@@ -55,9 +56,11 @@ def _summary(js: dict) -> str:
     lines.append("")
     lines.append(f"{'candidate':26s} {'score':>8s} {'t':>7s} {'crit':>6s}  verdict")
     for c in js["ranked"]:
-        t = "n/a" if c["t"] is None else f"{c['t']:.2f}"
+        # an infinite t is a candidate with nothing to fit here (a delay of zero)
+        t = "n/a" if c["t"] is None or not math.isfinite(c["t"]) else f"{c['t']:.2f}"
         score = 100 * (c["score"] or 0.0)
-        lines.append(f"{c['name']:26s} {score:+7.1f}% {t:>7s} {c['t_crit']:6.2f}  "
+        sc = f"{score:+7.1f}%" if abs(score) < 1000 else f"{'unstable':>8s}"
+        lines.append(f"{c['name']:26s} {sc} {t:>7s} {c['t_crit']:6.2f}  "
                      f"{'added' if c['name'] in js['found'] else (c['why'] or 'significant')}")
     lines.append("")
     for tag in ("base", "extended"):

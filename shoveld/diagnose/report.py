@@ -285,7 +285,9 @@ def write_report(d: Diagnosis, out_dir: str | Path) -> Path:
               "|---|---|---|---|---|"]
     for c in js["ranked"]:
         verdict = "**added**" if c["name"] in d.found else (c["why"] or "significant")
-        lines.append(f"| `{c['name']}` | {100 * (c['score'] or 0):+.1f} % | "
+        score = 100 * (c["score"] or 0)
+        removed = f"{score:+.1f} %" if abs(score) < 1000 else "unstable"
+        lines.append(f"| `{c['name']}` | {removed} | "
                      f"{c['t'] if c['t'] is not None else 'n/a'} ({c['t_crit']}) | "
                      f"{c['payload_rms_kg']} kg | {verdict} |")
     lines += ["", "## Payload per pass", "", "![payload per pass](payload_per_pass.png)", "",

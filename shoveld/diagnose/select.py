@@ -36,6 +36,10 @@ from scipy import stats
 from shoveld.diagnose.data import DataSet
 from shoveld.diagnose.fit import Evaluation, evaluate
 
+UNSTABLE = 1.0
+"""A candidate whose held-out residual is more than (1 + this) times the current model's
+has not fitted; it is reported as unstable, not ranked by its score."""
+
 
 @dataclass(frozen=True)
 class SelectionConfig:
@@ -151,7 +155,11 @@ def compare(dataset: DataSet, cur: Evaluation, cand: Evaluation, name: str, n_tr
                 ) if len(e0) else 0.0
     worse = _rms(e1) - _rms(e0) if len(e0) else 0.0
     why = ""
-    if not (t > t_crit):
+    if math.isfinite(gain) and gain < -UNSTABLE:
+        # The candidate's own fit is off (its parameters wander on data that does not
+        # excite them): not a finding either way, and its score says nothing.
+        why = f"unstable fit (held-out residual {1 - gain:.1f} x the current model's)"
+    elif not (t > t_crit):
         why = f"not significant (t {t:.2f} <= {t_crit:.2f})"
     elif not (gain >= cfg.min_gain):
         why = f"too small ({100 * gain:.1f} % < {100 * cfg.min_gain:.0f} % of the residual)"
