@@ -79,14 +79,17 @@ def router_acl(certs: Iterable[CertInfo], prefix: str = "shovel") -> dict[str, A
 
 def daemon_acl(prefix: str, shovel_id: str) -> dict[str, Any]:
     """The daemon's own list (any peer that passed mutual TLS): it sends only under its
-    own ``PREFIX/ID/**``, answers ``status`` queries, and takes no data from anyone."""
+    own ``PREFIX/ID/**``, takes queries only there (or ``PREFIX/*/status``), and takes
+    no data from anyone."""
     own = f"{prefix}/{shovel_id}/**"
     return {"enabled": True, "default_permission": "deny",
             "rules": [
                 _rule("own-out", "egress", ["put", "delete", "reply", "declare_queryable",
                                             "liveliness_token"], [own]),
                 _rule("listeners-in", "ingress", VIEW_IN, [f"{prefix}/**"]),
-                _rule("status-in", "ingress", ["query"], [f"{prefix}/*/status"]),
+                # the daemon answers nothing but status; which role may ask what is the
+                # routers' business (this list cannot tell a cab from maintenance)
+                _rule("status-in", "ingress", ["query"], [f"{prefix}/*/status", own]),
             ],
             "subjects": [{"id": "site"}],
             "policies": [{"subjects": ["site"],
