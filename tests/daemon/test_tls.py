@@ -10,6 +10,7 @@ fake pass under shovel s1's keys.
 from __future__ import annotations
 
 import json
+import shutil
 import threading
 import time
 from pathlib import Path
@@ -188,6 +189,18 @@ def test_router_refuses_intruders_and_fakes(tmp_path: Path, e2e_table: SignalsTa
             _open(endpoint, TlsConfig(site.dir / "ca.crt", other / "s1.crt",
                                       other / "s1.key"))
 
+        # a certificate of the site CA issued after the router's configuration was
+        # written (e.g. a lost laptop's, removed from it): connects, but is denied all
+        late = tmp_path / "pki-later"
+        shutil.copytree(site.dir, late)
+        pki.issue(late, "stranger", "cab")
+        stranger = _open(endpoint, TlsConfig(late / "ca.crt", late / "stranger.crt",
+                                             late / "stranger.key"))
+        made.append(_Closer(stranger))
+        heard: list[str] = []
+        stranger_sub = stranger.declare_subscriber(
+            "shovel/**", lambda x: heard.append(str(x.key_expr)))
+
         # a cab's certificate and another shovel's: connected, but their fakes go nowhere
         fakers = {n: _open(endpoint, site.tls(n)) for n in ("cab-s2", "s2")}
         made.extend(_Closer(s) for s in fakers.values())
@@ -227,6 +240,8 @@ def test_router_refuses_intruders_and_fakes(tmp_path: Path, e2e_table: SignalsTa
         assert [c["truck"] for c in view.closed] == [1, 2]
         assert all(c["total_kg"] < 100000 for c in view.closed)
         assert view.passes and all(p["payload_kg"] < 100000 for p in view.passes)
+        assert heard == []  # the stranger heard nothing
+        stranger_sub.undeclare()
 
         # status: the office gets the daemon's answer only (the cab-certified queryable
         # was refused); a cab may ask status but not any other key; maintenance may
