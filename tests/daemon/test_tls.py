@@ -34,7 +34,6 @@ from .conftest import (
     free_port,
     make_cfg,
     start_router,
-    wait_for,
 )
 
 FAKE = {"pass": 99, "truck": 99, "payload_kg": 999999.0, "std_kg": 1.0, "start": 0.0,
@@ -265,31 +264,66 @@ def test_router_refuses_intruders_and_fakes(tmp_path: Path, e2e_table: SignalsTa
 
 
 def test_cab_straight_to_a_tls_daemon(tmp_path: Path, e2e_table: SignalsTable,
-                                      params: ModelParams, site: Site) -> None:
+                                      params: ModelParams, site: Site,
+                                      capsys: pytest.CaptureFixture[str]) -> None:
     """Without a router (the daemon a peer listening on tls/): mutual TLS and the
-    daemon's own access control still let a certified cab see every pass."""
+    daemon's own access control still let ``shoveld cab --tls`` see every pass."""
+    from shoveld.cli import main
+
     endpoint = f"tls/127.0.0.1:{free_port()}"
     cfg = make_cfg(tmp_path, shovel={"id": "s1"},
                    zenoh={"listen": [endpoint], "tls": site.tls_table("s1")})
     assert cfg.zenoh.acl is not None
     svc, feed = table_service(e2e_table, cfg, params, close_truck_at_end=True)
-    cab = CabState()
-    client = None
+    cab_args = ["cab", "--connect", endpoint, "--shovel", "s1", "--lines",
+                "--tls", *(str(site.dir / f) for f in ("ca.crt", "cab-s1.crt", "cab-s1.key"))]
+    assert main([*cab_args[:-1], str(tmp_path / "nope.key")]) == 2
+    assert "--tls: " + str(tmp_path / "nope.key") + ": no such file" in capsys.readouterr().err
+    rc: list[int] = []
     try:
         svc.start(zenoh_wait_s=5.0)
         with pytest.raises(Exception, match="Unable to connect"):
             _open(endpoint, None)
-        client = CabClient(cab, [endpoint], "client", "s1", tls=site.tls("cab-s1"))
+        cab = threading.Thread(target=lambda: rc.append(main(
+            [*cab_args, "--until-closed-trucks", "2", "--duration", "30"])))
+        cab.start()
         assert svc.publisher.wait_subscribers(5.0)
         time.sleep(0.3)
         svc.run(threading.Event(), done=lambda: feed.finished)
         svc.flush()
-        assert wait_for(lambda: "s1" in cab.shovels
-                        and [c["truck"] for c in cab.shovels["s1"].closed] == [1, 2], 10.0)
+        cab.join(30)
+        assert rc == [0]
+        out = capsys.readouterr().out
+        for n in (1, 2, 3):
+            assert f"s1 pass {n} truck" in out, out
     finally:
-        if client is not None:
-            client.close()
         svc.close()
+
+
+def test_daemon_with_a_foreign_certificate_never_connects(tmp_path: Path, site: Site) -> None:
+    """A shovel whose certificate the site CA did not sign: the router refuses it, and
+    the daemon says so in health (it keeps retrying; weighing is not its business)."""
+    from shoveld.daemon.publisher import Publisher
+
+    endpoint = f"tls/127.0.0.1:{free_port()}"
+    router = start_router(site.router_config(endpoint, tmp_path / "router.json5"))
+    other = tmp_path / "other-ca"
+    pki.init_ca(other)
+    pki.issue(other, "s1", "shovel")
+    cfg = make_cfg(tmp_path, shovel={"id": "s1"},
+                   zenoh={"mode": "client", "listen": [], "connect": [endpoint],
+                          "tls": {"ca": str(site.dir / "ca.crt"),
+                                  "certificate": str(other / "s1.crt"),
+                                  "key": str(other / "s1.key")}})
+    pub = Publisher(cfg.zenoh, "s1", retry_s=(0.2, 0.5)).start(wait_s=2.0)
+    try:
+        assert not pub.connected
+        h = pub.health()
+        assert h["open"] is False and "zenoh open" in (h["last_error"] or "")
+        assert pub.put("pass", {"pass": 1}) is False and pub.dropped == 1
+    finally:
+        pub.close()
+        router.communicate("", timeout=10)
 
 
 class _Closer:
