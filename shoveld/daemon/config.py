@@ -477,7 +477,8 @@ def parse_config(doc: Mapping[str, Any], where: str = "<config>",
 
     zr = _Reader(where, top.table("zenoh"), "zenoh.")
     mode = zr.string("mode", "peer", ("peer", "client", "router"))
-    listen = zr.strings("listen", ("tcp/127.0.0.1:7447",) if mode != "client" else ())
+    proto = "tls" if zr.has("tls") else "tcp"
+    listen = zr.strings("listen", (f"{proto}/127.0.0.1:7447",) if mode != "client" else ())
     connect = zr.strings("connect", ())
     for k, eps in (("listen", listen), ("connect", connect)):
         for ep in eps:

@@ -155,6 +155,11 @@ def test_check_config_names_the_tls_problem(tmp_path: Path, site: Site,
         assert rc == 2, case
         assert key in err and why in err, (case, err)
         assert "\n" not in err and "Traceback" not in err, case
+    # a peer with [zenoh.tls] and no listen key listens on tls/ by default
+    from shoveld.daemon.config import parse_config
+
+    doc = {"shovel": {"id": "s1", "params": str(PARAMS)}, "zenoh": {"tls": good}}
+    assert parse_config(doc, require_devices=False).zenoh.listen == ("tls/127.0.0.1:7447",)
     rc, err = check(_config(tmp_path, good, connect="tcp/10.20.0.2:7447", name="plain.toml"))
     assert rc == 2 and "key 'zenoh.connect'" in err, err
     assert "'tcp/10.20.0.2:7447' is plaintext but [zenoh.tls] asks for TLS" in err
@@ -177,6 +182,8 @@ def test_router_refuses_intruders_and_fakes(tmp_path: Path, e2e_table: SignalsTa
         made.append(CabClient(cab, [endpoint], "client", "s1", tls=site.tls("cab-s1")))
         office = Collector(endpoint, tls=site.tls("office"))
         made.append(office)
+        everything = Collector(endpoint, key="**", tls=site.tls("office"))
+        made.append(everything)  # not under shovel/: refused as a whole
 
         # no certificate, or one from another CA: no session at all
         with pytest.raises(Exception, match="Unable to connect"):
@@ -240,6 +247,7 @@ def test_router_refuses_intruders_and_fakes(tmp_path: Path, e2e_table: SignalsTa
         assert all(c["total_kg"] < 100000 for c in view.closed)
         assert view.passes and all(p["payload_kg"] < 100000 for p in view.passes)
         assert heard == []  # the stranger heard nothing
+        assert everything.samples == []
         stranger_sub.undeclare()
 
         # status: the office gets the daemon's answer only (the cab-certified queryable
