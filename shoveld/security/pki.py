@@ -59,6 +59,8 @@ def _write_private(path: Path, data: bytes) -> None:
         fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
     except FileExistsError:
         raise PkiError(f"{path}: exists already (remove it to make a new one)") from None
+    except OSError as e:
+        raise PkiError(f"{path}: cannot write: {e.strerror}") from None
     with os.fdopen(fd, "wb") as f:
         os.fchmod(f.fileno(), 0o600)
         f.write(data)
@@ -67,8 +69,11 @@ def _write_private(path: Path, data: bytes) -> None:
 def _write_public(path: Path, data: bytes) -> None:
     if path.exists():
         raise PkiError(f"{path}: exists already (remove it to make a new one)")
-    path.write_bytes(data)
-    path.chmod(0o644)
+    try:
+        path.write_bytes(data)
+        path.chmod(0o644)
+    except OSError as e:
+        raise PkiError(f"{path}: cannot write: {e.strerror}") from None
 
 
 def _key_pem(key: ec.EllipticCurvePrivateKey) -> bytes:
@@ -79,7 +84,12 @@ def _key_pem(key: ec.EllipticCurvePrivateKey) -> bytes:
 def init_ca(directory: str | Path, site: str = "shoveld site", days: int = 3650) -> Path:
     """Make the site CA (``ca.crt``, ``ca.key`` 0600) in ``directory``; its path."""
     d = Path(directory)
-    d.mkdir(parents=True, exist_ok=True)
+    if not 0 < days <= 36500:
+        raise PkiError(f"days must be > 0 and at most 36500, got {days}")
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise PkiError(f"{d}: cannot make the folder: {e.strerror}") from None
     if (d / CA_KEY).exists() or (d / CA_CERT).exists():
         raise PkiError(f"{d / CA_CERT}: a site CA exists already in {d}")
     key = ec.generate_private_key(ec.SECP256R1())
@@ -139,8 +149,8 @@ def issue(directory: str | Path, name: str, role: str, hosts: tuple[str, ...] = 
                        "for a shovel, its shovel.id")
     if role not in ROLES:
         raise PkiError(f"role {role!r}: must be one of {list(ROLES)}")
-    if days <= 0:
-        raise PkiError(f"days must be > 0, got {days}")
+    if not 0 < days <= 36500:
+        raise PkiError(f"days must be > 0 and at most 36500, got {days}")
     ca_cert, ca_key = _load_ca(d)
     for other in list_certs(d):
         if other.common_name == name:
@@ -206,6 +216,8 @@ def read_cert(path: str | Path) -> CertInfo:
 def list_certs(directory: str | Path) -> list[CertInfo]:
     """The peer certificates issued in ``directory`` (not the CA), by name."""
     d = Path(directory)
+    if not d.is_dir():
+        raise PkiError(f"{d}: no such folder")
     return [read_cert(p) for p in sorted(d.glob("*.crt")) if p.name != CA_CERT]
 
 

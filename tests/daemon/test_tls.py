@@ -72,6 +72,13 @@ def test_pki_cli_one_line_errors(tmp_path: Path, capsys: pytest.CaptureFixture[s
     d = tmp_path / "pki"
     assert main(["pki", "issue", "s1", "--role", "shovel", "--dir", str(d)]) == 2
     assert "no site CA here" in capsys.readouterr().err
+    assert main(["pki", "init", "--dir", str(d), "--days", "0"]) == 2
+    assert "days must be > 0 and at most 36500, got 0" in capsys.readouterr().err
+    (tmp_path / "afile").write_text("")
+    assert main(["pki", "init", "--dir", str(tmp_path / "afile")]) == 2
+    assert "cannot make the folder" in capsys.readouterr().err
+    assert main(["pki", "list", "--dir", str(tmp_path / "nowhere")]) == 2
+    assert "no such folder" in capsys.readouterr().err
     assert main(["pki", "init", "--dir", str(d)]) == 0
     assert main(["pki", "init", "--dir", str(d)]) == 2
     assert "a site CA exists already" in capsys.readouterr().err
