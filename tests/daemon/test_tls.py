@@ -308,6 +308,13 @@ def test_cab_straight_to_a_tls_daemon(tmp_path: Path, e2e_table: SignalsTable,
         svc.flush()
         cab.join(30)
         assert rc == [0]
+        # the daemon's own list: queries of its own keys pass, wider ones do not
+        laptop = _open(endpoint, site.tls("laptop"))
+        try:
+            assert len([r for r in laptop.get("shovel/s1/status", timeout=2.0) if r.ok]) == 1
+            assert [r for r in laptop.get("shovel/**", timeout=1.0) if r.ok] == []
+        finally:
+            laptop.close()
         out = capsys.readouterr().out
         for n in (1, 2, 3):
             assert f"s1 pass {n} truck" in out, out
