@@ -18,9 +18,13 @@ import sys
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any, TextIO
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, TextIO
 
 from shoveld.cli import CliError
+
+if TYPE_CHECKING:
+    from shoveld.daemon.config import TlsConfig
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -40,6 +44,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="print one line per event even on a terminal")
     p.add_argument("--until-closed-trucks", type=int, default=None, metavar="N",
                    help="exit after N trucks were closed (demo, tests)")
+    p.add_argument("--tls", nargs=3, metavar=("CA", "CERT", "KEY"), default=None,
+                   help="mutual TLS with the site CA: its certificate, this display's "
+                        "certificate and key (from 'shoveld pki issue NAME --role cab')")
     p.set_defaults(func=run)
 
 
@@ -208,7 +215,8 @@ class CabClient:
     """The Zenoh side of the cab: subscriptions, liveliness, the status query."""
 
     def __init__(self, state: CabState, connect: list[str], mode: str = "client",
-                 shovel: str = "*", prefix: str = "shovel") -> None:
+                 shovel: str = "*", prefix: str = "shovel",
+                 tls: TlsConfig | None = None) -> None:
         import zenoh
 
         from shoveld.daemon.publisher import zenoh_config
@@ -216,7 +224,7 @@ class CabClient:
         self.state = state
         self.prefix = prefix
         self.shovel = shovel
-        self.session = zenoh.open(zenoh_config(mode, (), connect))
+        self.session = zenoh.open(zenoh_config(mode, (), connect, tls=tls))
         n = len(prefix.split("/"))
         self._n = n
 
@@ -309,9 +317,17 @@ def show(state: CabState, out: TextIO, tty: bool, stop: threading.Event,
 
 def run(args: argparse.Namespace) -> int:
     state = CabState()
+    tls = None
+    if args.tls:
+        from shoveld.daemon.config import TlsConfig
+
+        tls = TlsConfig(*(Path(x) for x in args.tls))
+        for x in tls.ca, tls.certificate, tls.key:
+            if not x.is_file():
+                raise CliError(f"--tls: {x}: no such file")
     try:
         client = CabClient(state, args.connect or ["tcp/127.0.0.1:7447"], args.mode,
-                           args.shovel, args.prefix)
+                           args.shovel, args.prefix, tls)
     except Exception as e:  # noqa: BLE001 - zenoh.ZError
         raise CliError(f"cannot connect to Zenoh at {args.connect or 'tcp/127.0.0.1:7447'}: "
                        f"{e}") from None

@@ -14,7 +14,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         "check-config", help="validate the service configuration",
         description="Reads the TOML file, checks every key (devices through their drivers' "
                     "own checks), the calibrated parameters file it names, and that every "
-                    "signal the payload needs has a source. Prints a summary, or the first "
+                    "signal the payload needs has a source; with [zenoh.tls], that the "
+                    "certificates and key are readable and in date and every endpoint is "
+                    "tls/. Prints a summary, or the first "
                     "problem naming the key, and exits 2.")
     p.add_argument("config", nargs="?", default=DEFAULT_CONFIG, metavar="FILE")
     p.add_argument("--no-params", action="store_true",
@@ -23,10 +25,16 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from shoveld.daemon.config import ConfigError, check_params, load_config
+    from shoveld.daemon.config import (
+        ConfigError,
+        check_params,
+        check_tls_files,
+        load_config,
+    )
 
     try:
         cfg = load_config(args.config)
+        tls_notes = check_tls_files(cfg)
         params = None if args.no_params else check_params(cfg)
     except ConfigError as e:
         raise CliError(str(e)) from None
@@ -37,6 +45,11 @@ def run(args: argparse.Namespace) -> int:
     z = cfg.zenoh
     print(f"  zenoh {z.mode}: listen {list(z.listen)} connect {list(z.connect)}, "
           f"keys {z.prefix}/{cfg.shovel_id}/*")
+    if z.tls is not None:
+        acl = "with" if z.acl else "without"
+        print(f"  zenoh mutual TLS, {acl} the daemon's access control")
+        for n in tls_notes:
+            print(f"    {n}")
     print(f"  truck target {cfg.engine.truck_target_kg:g} kg, gap {cfg.engine.truck_gap_s:g} s")
     for name, dev in cfg.devices.items():
         print(f"  device {name} ({dev.kind}, max age {dev.max_age_s:g} s): "

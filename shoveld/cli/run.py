@@ -43,7 +43,12 @@ def run(args: argparse.Namespace) -> int:
     import sqlite3
     from pathlib import Path
 
-    from shoveld.daemon.config import ConfigError, check_params, load_config
+    from shoveld.daemon.config import (
+        ConfigError,
+        check_params,
+        check_tls_files,
+        load_config,
+    )
     from shoveld.daemon.logs import setup_logging
     from shoveld.daemon.service import Service
 
@@ -52,9 +57,14 @@ def run(args: argparse.Namespace) -> int:
         if args.state_dir:
             cfg = dataclasses.replace(cfg, state_dir=Path(args.state_dir))
         params = check_params(cfg)
+        check_tls_files(cfg, dates=False)
     except ConfigError as e:
         raise CliError(f"refusing to start: {e}") from None
     setup_logging("DEBUG" if args.verbose > 1 else "INFO" if args.verbose else cfg.log_level)
+    try:  # an expired certificate stops Zenoh, not the weighing and the pass log
+        check_tls_files(cfg)
+    except ConfigError as e:
+        log.error("%s: Zenoh will not connect until it is renewed", e)
     stop = threading.Event()
     install_stop_signals(stop)
     if args.duration is not None:

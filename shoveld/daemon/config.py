@@ -79,6 +79,20 @@ class LoopConfig:
 
 
 @dataclass(frozen=True)
+class TlsConfig:
+    """``[zenoh.tls]``: mutual TLS with the site CA (see ``shoveld pki``)."""
+
+    ca: Path
+    """The site CA certificate: peers must present a certificate it signed."""
+    certificate: Path
+    """This shovel's certificate (common name = ``shovel.id``)."""
+    key: Path
+    """Its private key (owner-only)."""
+    access_control: bool = True
+    """Also apply the daemon's own access-control list (``shoveld.security.acl``)."""
+
+
+@dataclass(frozen=True)
 class ZenohConfig:
     mode: str = "peer"
     listen: tuple[str, ...] = ("tcp/127.0.0.1:7447",)
@@ -89,6 +103,10 @@ class ZenohConfig:
     live_rate_hz: float = 10.0
     extra: dict[str, Any] = field(default_factory=dict)
     """``[zenoh.config]``: raw Zenoh config keys (``"transport/unicast/max_links" = 4``)."""
+    tls: TlsConfig | None = None
+    """``[zenoh.tls]``: every endpoint is then ``tls/``."""
+    acl: dict[str, Any] | None = None
+    """The ``access_control`` section the session is opened with (from ``tls``)."""
 
 
 @dataclass(frozen=True)
@@ -386,6 +404,48 @@ def _check_zenoh_extra(where: str, extra: Mapping[str, Any]) -> None:
                               ) from None
 
 
+def _parse_tls(where: str, t: Mapping[str, Any], base_dir: Path | None) -> TlsConfig:
+    r = _Reader(where, t, "zenoh.tls.")
+    tls = TlsConfig(ca=_path(base_dir, r.string("ca")),
+                    certificate=_path(base_dir, r.string("certificate")),
+                    key=_path(base_dir, r.string("key")),
+                    access_control=r.boolean("access_control", True))
+    r.done()
+    return tls
+
+
+def check_tls_files(cfg: DaemonConfig, dates: bool = True) -> list[str]:
+    """The TLS files exist, are readable and (with ``dates``) in date, and the
+    certificate is this shovel's; ConfigError names the key and file. Returns notes for
+    check-config."""
+    tls = cfg.zenoh.tls
+    if tls is None:
+        return []
+    from shoveld.security.pki import PkiError, check_cert_dates, check_key, read_cert
+
+    where = str(cfg.path) if cfg.path else "<config>"
+    notes = []
+    try:
+        for k in ("ca", "certificate"):
+            try:
+                info = read_cert(getattr(tls, k))
+                if dates:
+                    check_cert_dates(info)
+            except PkiError as e:
+                raise ConfigError(f"{where}: key 'zenoh.tls.{k}': {e}") from None
+            notes.append(f"{k} {info.path}: {info.common_name!r}, valid until "
+                         f"{info.not_after:%Y-%m-%d}")
+        if info.role not in (None, "shovel") or info.common_name != cfg.shovel_id:
+            raise ConfigError(
+                f"{where}: key 'zenoh.tls.certificate': {info.path} is for "
+                f"{info.common_name!r} (role {info.role}), not shovel {cfg.shovel_id!r}: the "
+                f"routers let it publish only under {cfg.zenoh.prefix}/{info.common_name}/")
+        check_key(tls.key)
+    except PkiError as e:
+        raise ConfigError(f"{where}: key 'zenoh.tls.key': {e}") from None
+    return notes
+
+
 def parse_config(doc: Mapping[str, Any], where: str = "<config>",
                  base_dir: Path | None = None, check_drivers: bool = True,
                  require_devices: bool = True) -> DaemonConfig:
@@ -416,7 +476,8 @@ def parse_config(doc: Mapping[str, Any], where: str = "<config>",
 
     zr = _Reader(where, top.table("zenoh"), "zenoh.")
     mode = zr.string("mode", "peer", ("peer", "client", "router"))
-    listen = zr.strings("listen", ("tcp/127.0.0.1:7447",) if mode != "client" else ())
+    proto = "tls" if zr.has("tls") else "tcp"
+    listen = zr.strings("listen", (f"{proto}/127.0.0.1:7447",) if mode != "client" else ())
     connect = zr.strings("connect", ())
     for k, eps in (("listen", listen), ("connect", connect)):
         for ep in eps:
@@ -436,6 +497,19 @@ def parse_config(doc: Mapping[str, Any], where: str = "<config>",
                      live_rate_hz=zr.number("live_rate_hz", 10.0, positive=True,
                                             hi=loop.rate_hz),
                      extra=dict(zr.table("config")))
+    if zr.has("tls"):
+        tls = _parse_tls(where, zr.table("tls"), base_dir)
+        for k, eps in (("listen", listen), ("connect", connect)):
+            for ep in eps:
+                if not ep.startswith("tls/"):
+                    raise zr.fail(k, f"endpoint {ep!r} is plaintext but [zenoh.tls] asks for "
+                                     "TLS: use 'tls/HOST:PORT'")
+        acl = None
+        if tls.access_control:
+            from shoveld.security.acl import daemon_acl
+
+            acl = daemon_acl(prefix, shovel_id)
+        zc = dataclasses.replace(zc, tls=tls, acl=acl)
     zr.done()
     _check_zenoh_extra(where, zc.extra)
 

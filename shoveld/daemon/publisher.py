@@ -22,7 +22,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from shoveld.daemon.config import ZenohConfig
+from shoveld.daemon.config import TlsConfig, ZenohConfig
 
 log = logging.getLogger(__name__)
 
@@ -32,8 +32,10 @@ RELIABLE_TOPICS = frozenset({"pass", "truck"})
 
 def zenoh_config(mode: str, listen: tuple[str, ...] | list[str] = (),
                  connect: tuple[str, ...] | list[str] = (), multicast: bool = False,
-                 extra: dict[str, Any] | None = None) -> Any:
-    """A ``zenoh.Config`` from the few settings shoveld uses (plus raw extra keys)."""
+                 extra: dict[str, Any] | None = None, tls: TlsConfig | None = None,
+                 acl: dict[str, Any] | None = None) -> Any:
+    """A ``zenoh.Config`` from the few settings shoveld uses (plus raw extra keys);
+    with ``tls``, mutual TLS with the site CA, and ``acl`` as its access control."""
     import zenoh
 
     c = zenoh.Config()
@@ -41,6 +43,14 @@ def zenoh_config(mode: str, listen: tuple[str, ...] | list[str] = (),
     c.insert_json5("listen/endpoints", json.dumps(list(listen)))
     c.insert_json5("connect/endpoints", json.dumps(list(connect)))
     c.insert_json5("scouting/multicast/enabled", json.dumps(bool(multicast)))
+    if tls is not None:
+        cert, key = str(tls.certificate), str(tls.key)
+        c.insert_json5("transport/link/tls", json.dumps({
+            "root_ca_certificate": str(tls.ca), "enable_mtls": True,
+            "listen_certificate": cert, "listen_private_key": key,
+            "connect_certificate": cert, "connect_private_key": key}))
+    if acl is not None:
+        c.insert_json5("access_control", json.dumps(acl))
     for k, v in (extra or {}).items():
         c.insert_json5(k, json.dumps(v))
     return c
@@ -114,7 +124,7 @@ class Publisher:
             c = self.cfg
             try:
                 session = zenoh.open(zenoh_config(c.mode, c.listen, c.connect,
-                                                  c.multicast_scouting, c.extra))
+                                                  c.multicast_scouting, c.extra, c.tls, c.acl))
             except Exception as e:  # noqa: BLE001 - zenoh.ZError and config errors
                 self.last_error = f"zenoh open: {e}"
                 log.warning("zenoh: cannot open session (%s); retrying in %.1f s", e, delay)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import socket
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -12,7 +14,7 @@ from typing import Any
 
 import pytest
 
-from shoveld.daemon.config import DaemonConfig, parse_config
+from shoveld.daemon.config import DaemonConfig, TlsConfig, parse_config
 from shoveld.model.params import ModelParams, load_params
 from shoveld.signals.table import SignalsTable
 
@@ -67,15 +69,78 @@ def wait_for(pred: Callable[[], bool], timeout: float, poll_s: float = 0.05) -> 
     return pred()
 
 
+class Site:
+    """A site PKI made for the tests: a CA, a router, shovels, cabs, an office, a
+    maintenance laptop (real certificates, made by ``shoveld.security.pki``)."""
+
+    PEERS = (("r1", "router"), ("s1", "shovel"), ("s2", "shovel"), ("cab-s1", "cab"),
+             ("cab-s1b", "cab"), ("cab-s2", "cab"), ("office", "office"), ("laptop", "maintenance"))
+
+    def __init__(self, directory: Path) -> None:
+        from shoveld.security import pki
+
+        self.dir = directory
+        pki.init_ca(directory, "test site")
+        for name, role in self.PEERS:
+            pki.issue(directory, name, role)
+
+    def tls(self, name: str) -> TlsConfig:
+        return TlsConfig(self.dir / "ca.crt", self.dir / f"{name}.crt", self.dir / f"{name}.key")
+
+    def tls_table(self, name: str) -> dict[str, str]:
+        """The ``[zenoh.tls]`` table of a daemon config for peer ``name``."""
+        return {"ca": str(self.dir / "ca.crt"), "certificate": str(self.dir / f"{name}.crt"),
+                "key": str(self.dir / f"{name}.key")}
+
+    def router_config(self, endpoint: str, path: Path) -> Path:
+        """The router's config file, written by ``shoveld pki router-config``."""
+        from shoveld.cli import main
+
+        assert main(["pki", "router-config", "r1", "--dir", str(self.dir), "--listen",
+                     endpoint, "-o", str(path)]) == 0
+        return path
+
+
+@pytest.fixture(scope="session")
+def site(tmp_path_factory: pytest.TempPathFactory) -> Site:
+    return Site(tmp_path_factory.mktemp("pki"))
+
+
+ROUTER = """
+import json, sys, time, zenoh
+if sys.argv[1].endswith(".json5"):
+    c = zenoh.Config.from_file(sys.argv[1])
+else:
+    c = zenoh.Config()
+    c.insert_json5("mode", '"router"')
+    c.insert_json5("listen/endpoints", json.dumps([sys.argv[1]]))
+    c.insert_json5("scouting/multicast/enabled", "false")
+s = zenoh.open(c)
+print("up", flush=True)
+sys.stdin.read()
+s.close()
+"""
+
+
+def start_router(endpoint_or_config: str | Path) -> subprocess.Popen[str]:
+    """A router process (a plain ``tcp/`` one on an endpoint, or from a config file
+    ``*.json5``), once it listens; stop it with ``communicate("")``."""
+    r = subprocess.Popen([sys.executable, "-c", ROUTER, str(endpoint_or_config)],
+                         stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    assert r.stdout is not None and r.stdout.readline().strip() == "up"
+    return r
+
+
 class Collector:
     """A Zenoh client session collecting JSON samples under a key expression."""
 
-    def __init__(self, endpoint: str, key: str = "shovel/**", mode: str = "client") -> None:
+    def __init__(self, endpoint: str, key: str = "shovel/**", mode: str = "client",
+                 tls: TlsConfig | None = None) -> None:
         import zenoh
 
         from shoveld.daemon.publisher import zenoh_config
 
-        self.session = zenoh.open(zenoh_config(mode, (), [endpoint]))
+        self.session = zenoh.open(zenoh_config(mode, (), [endpoint], tls=tls))
         self.samples: list[tuple[str, dict[str, Any], str]] = []
         self.lock = threading.Lock()
 
@@ -101,8 +166,9 @@ class Collector:
 def collector_factory() -> Iterator[Callable[..., Collector]]:
     made: list[Collector] = []
 
-    def make(endpoint: str, key: str = "shovel/**", mode: str = "client") -> Collector:
-        c = Collector(endpoint, key, mode)
+    def make(endpoint: str, key: str = "shovel/**", mode: str = "client",
+             tls: TlsConfig | None = None) -> Collector:
+        c = Collector(endpoint, key, mode, tls)
         made.append(c)
         return c
     yield make

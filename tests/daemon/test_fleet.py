@@ -1,14 +1,14 @@
 """A fleet through a router: two shovels, three cab displays, one mine-office subscriber.
 
-The router is a separate Python process (zenoh-python in router mode); the shovels'
-daemons are clients of it, as in production; the cabs and the office are clients too.
+The router is a separate Python process (zenoh-python in router mode) with the site's
+configuration from ``shoveld pki router-config``: mutual TLS and the access control by
+certificate name; the shovels' daemons are clients of it, as in production, each with
+its own certificate; the cabs and the office are clients too, with theirs.
 """
 
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
@@ -19,47 +19,31 @@ from shoveld.daemon.tablefeed import table_service
 from shoveld.model.params import ModelParams
 from shoveld.signals.table import SignalsTable
 
-from .conftest import Collector, free_port, make_cfg, wait_for
+from .conftest import Collector, Site, free_port, make_cfg, start_router, wait_for
 
-ROUTER = """
-import json, sys, time, zenoh
-c = zenoh.Config()
-c.insert_json5("mode", '"router"')
-c.insert_json5("listen/endpoints", json.dumps([sys.argv[1]]))
-c.insert_json5("scouting/multicast/enabled", "false")
-s = zenoh.open(c)
-print("up", flush=True)
-sys.stdin.read()
-s.close()
-"""
-
-
-def start_router(endpoint: str) -> subprocess.Popen[str]:
-    """The router process, once it listens on ``endpoint``; stop it with communicate("")."""
-    r = subprocess.Popen([sys.executable, "-c", ROUTER, endpoint], stdin=subprocess.PIPE,
-                         stdout=subprocess.PIPE, text=True)
-    assert r.stdout is not None and r.stdout.readline().strip() == "up"
-    return r
+CAB_CERTS = {"s1-a": "cab-s1", "s1-b": "cab-s1b", "s2-a": "cab-s2"}
 
 
 def test_fleet_through_a_router(tmp_path: Path, e2e_table: SignalsTable,
-                                params: ModelParams) -> None:
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    router = start_router(endpoint)
+                                params: ModelParams, site: Site) -> None:
+    endpoint = f"tls/127.0.0.1:{free_port()}"
+    router = start_router(site.router_config(endpoint, tmp_path / "router.json5"))
     made: list[Any] = []
     try:
         services = []
         for sid in ("s1", "s2"):
             cfg = make_cfg(tmp_path / sid, shovel={"id": sid},
-                           zenoh={"mode": "client", "listen": [], "connect": [endpoint]})
+                           zenoh={"mode": "client", "listen": [], "connect": [endpoint],
+                                  "tls": site.tls_table(sid)})
             svc, feed = table_service(e2e_table, cfg, params, close_truck_at_end=True)
             svc.start(zenoh_wait_s=5.0)
             assert svc.publisher.connected
             services.append((svc, feed))
         cabs = {name: CabState() for name in ("s1-a", "s1-b", "s2-a")}
         for name, state in cabs.items():
-            made.append(CabClient(state, [endpoint], "client", name[:2]))
-        office = Collector(endpoint)
+            made.append(CabClient(state, [endpoint], "client", name[:2],
+                                  tls=site.tls(CAB_CERTS[name])))
+        office = Collector(endpoint, tls=site.tls("office"))
         made.append(office)
         for svc, _ in services:
             assert svc.publisher.wait_subscribers(5.0)
@@ -106,22 +90,23 @@ def test_fleet_through_a_router(tmp_path: Path, e2e_table: SignalsTable,
 
 
 def test_cab_catches_up_on_passes_made_while_the_router_was_down(
-        tmp_path: Path, e2e_table: SignalsTable, params: ModelParams) -> None:
+        tmp_path: Path, e2e_table: SignalsTable, params: ModelParams, site: Site) -> None:
     """Zenoh does not re-send what was published while a link was down; the cab asks
     ``status`` when the daemon's liveliness token comes back, so it still shows every
     pass of the open truck."""
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-
-    router = start_router(endpoint)
+    endpoint = f"tls/127.0.0.1:{free_port()}"
+    router_cfg = site.router_config(endpoint, tmp_path / "router.json5")
+    router = start_router(router_cfg)
     cab = CabState()
     client: CabClient | None = None
     svc = None
     try:
         cfg = make_cfg(tmp_path, shovel={"id": "s1"},
-                       zenoh={"mode": "client", "listen": [], "connect": [endpoint]})
+                       zenoh={"mode": "client", "listen": [], "connect": [endpoint],
+                              "tls": site.tls_table("s1")})
         svc, feed = table_service(e2e_table, cfg, params)  # the last truck stays open
         svc.start(zenoh_wait_s=5.0)
-        client = CabClient(cab, [endpoint], "client", "s1")
+        client = CabClient(cab, [endpoint], "client", "s1", tls=site.tls("cab-s1"))
         assert wait_for(lambda: "s1" in cab.shovels and cab.shovels["s1"].alive, 5.0)
         router.communicate("", timeout=10)  # the router goes away
         assert wait_for(lambda: cab.shovels["s1"].alive is False, 10.0)
@@ -129,7 +114,7 @@ def test_cab_catches_up_on_passes_made_while_the_router_was_down(
         svc.flush()
         assert [p["pass"] for p in svc.status()["truck_passes"]] == [3]
         assert cab.shovels["s1"].passes == []  # nothing reached the cab
-        router = start_router(endpoint)
+        router = start_router(router_cfg)
         # both sessions reconnect; the token reappears and the cab asks status
         assert wait_for(lambda: [p["pass"] for p in cab.shovels["s1"].passes] == [3], 30.0), \
             cab.shovels["s1"]

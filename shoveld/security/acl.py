@@ -1,0 +1,111 @@
+"""Zenoh access-control lists for the site: who may publish, subscribe and query what.
+
+Zenoh (1.x) matches a remote peer by its TLS certificate's common name
+(``cert_common_names``), and a rule applies to a message whose key expression is
+*included* in the rule's. The router's list is built from the certificates issued in
+the PKI folder (their role is in the subject's OU), so a new cab means re-running
+``shoveld pki router-config`` and restarting the router (Zenoh reads the list at start).
+
+Per role, at the router (``ingress`` = from that peer, ``egress`` = to it):
+- shovel NAME: may put, reply, declare its queryable and liveliness token only under
+  ``PREFIX/NAME/**``; receives subscriber declarations and queries (so it knows who
+  listens and answers ``status``), never another peer's data.
+- cab, office: may subscribe (data and liveliness) under ``PREFIX/**`` and query
+  ``PREFIX/*/status``; receive data, replies and tokens; may publish nothing.
+- maintenance: as the office, and may query anything under ``PREFIX/**``.
+- router: another site router; everything passes (each router applies its own list).
+Everything else is denied (``default_permission: deny``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from typing import Any
+
+from shoveld.security.pki import CertInfo
+
+VIEW_IN = ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"]
+VIEW_OUT = ["put", "delete", "reply", "liveliness_token"]
+ALL_MESSAGES = ["put", "delete", "declare_subscriber", "query", "reply", "declare_queryable",
+                "liveliness_token", "liveliness_query", "declare_liveliness_subscriber"]
+
+
+def _rule(rid: str, flow: str, messages: list[str], keys: list[str]) -> dict[str, Any]:
+    return {"id": rid, "permission": "allow", "flows": [flow], "messages": messages,
+            "key_exprs": keys}
+
+
+def router_acl(certs: Iterable[CertInfo], prefix: str = "shovel") -> dict[str, Any]:
+    """The ``access_control`` section of a site router, from the issued certificates."""
+    by_role: dict[str, list[str]] = {}
+    for c in certs:
+        if c.role is not None:
+            by_role.setdefault(c.role, []).append(c.common_name)
+    rules: list[dict[str, Any]] = [
+        _rule("to-shovels", "egress", ["query", "declare_subscriber",
+                                       "declare_liveliness_subscriber", "liveliness_query"],
+              [f"{prefix}/**"]),
+        _rule("view-in", "ingress", VIEW_IN, [f"{prefix}/**"]),
+        _rule("view-status", "ingress", ["query"], [f"{prefix}/*/status"]),
+        _rule("view-out", "egress", VIEW_OUT, [f"{prefix}/**"]),
+        _rule("maintenance-query", "ingress", ["query"], [f"{prefix}/**"]),
+        _rule("router-in", "ingress", ALL_MESSAGES, ["**"]),
+        _rule("router-out", "egress", ALL_MESSAGES, ["**"]),
+    ]
+    subjects: list[dict[str, Any]] = []
+    policies: list[dict[str, Any]] = []
+    for name in sorted(by_role.get("shovel", [])):
+        rules.append(_rule(f"shovel-{name}-in", "ingress",
+                           ["put", "delete", "reply", "declare_queryable", "liveliness_token"],
+                           [f"{prefix}/{name}/**"]))
+        subjects.append({"id": f"shovel-{name}", "cert_common_names": [name]})
+        policies.append({"id": f"shovel-{name}", "subjects": [f"shovel-{name}"],
+                         "rules": [f"shovel-{name}-in", "to-shovels"]})
+    grants = {"cab": ["view-in", "view-status", "view-out"],
+              "office": ["view-in", "view-status", "view-out"],
+              "maintenance": ["view-in", "view-status", "view-out", "maintenance-query"],
+              "router": ["router-in", "router-out"]}
+    for role, rule_ids in grants.items():
+        names = sorted(by_role.get(role, []))
+        if not names:  # an empty list would be a wildcard: leave the role out
+            continue
+        subjects.append({"id": role, "cert_common_names": names})
+        policies.append({"id": role, "subjects": [role], "rules": rule_ids})
+    used = {r for p in policies for r in p["rules"]}
+    return {"enabled": True, "default_permission": "deny",
+            "rules": [r for r in rules if r["id"] in used], "subjects": subjects,
+            "policies": policies}
+
+
+def daemon_acl(prefix: str, shovel_id: str) -> dict[str, Any]:
+    """The daemon's own list (any peer that passed mutual TLS): it sends only under its
+    own ``PREFIX/ID/**``, takes queries only there (or ``PREFIX/*/status``), and takes
+    no data from anyone."""
+    own = f"{prefix}/{shovel_id}/**"
+    return {"enabled": True, "default_permission": "deny",
+            "rules": [
+                _rule("own-out", "egress", ["put", "delete", "reply", "declare_queryable",
+                                            "liveliness_token"], [own]),
+                _rule("listeners-in", "ingress", VIEW_IN, [f"{prefix}/**"]),
+                # the daemon answers nothing but status; which role may ask what is the
+                # routers' business (this list cannot tell a cab from maintenance)
+                _rule("status-in", "ingress", ["query"], [f"{prefix}/*/status", own]),
+            ],
+            "subjects": [{"id": "site"}],
+            "policies": [{"subjects": ["site"],
+                          "rules": ["own-out", "listeners-in", "status-in"]}]}
+
+
+def router_config(listen: list[str], ca: str, cert: str, key: str,
+                  certs: Iterable[CertInfo], prefix: str = "shovel",
+                  connect: list[str] | None = None) -> dict[str, Any]:
+    """A whole router configuration (for ``zenohd -c`` or ``zenoh.Config.from_json5``):
+    mutual TLS with the site CA on ``listen`` and the access control above."""
+    tls = {"root_ca_certificate": ca, "enable_mtls": True,
+           "listen_certificate": cert, "listen_private_key": key,
+           "connect_certificate": cert, "connect_private_key": key}
+    return {"mode": "router", "listen": {"endpoints": list(listen)},
+            "connect": {"endpoints": list(connect or [])},
+            "scouting": {"multicast": {"enabled": False}},
+            "transport": {"link": {"tls": tls}},
+            "access_control": router_acl(certs, prefix)}

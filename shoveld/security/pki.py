@@ -1,0 +1,245 @@
+"""A site CA and one certificate per peer, for Zenoh's mutual TLS.
+
+Made with the ``cryptography`` package (no ``openssl`` command line to parse, and the
+same code reads a certificate back to check its dates in ``check-config``). Keys are
+ECDSA P-256 in PKCS#8 PEM (what rustls, inside Zenoh, reads), written owner-only
+(0600) whatever the umask. A certificate says who it is in its subject: the common
+name is the peer's NAME (for a shovel: its ``shovel.id``), the organizational unit its
+role; both are what the routers' access-control lists are built from.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import ipaddress
+import os
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+from cryptography import x509
+from cryptography.hazmat.primitives import hashes, serialization
+from cryptography.hazmat.primitives.asymmetric import ec
+from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
+
+ROLES = ("shovel", "cab", "office", "maintenance", "router")
+"""Who a certificate is for; the router's access control grants by role."""
+
+NAME_RE = re.compile(r"[A-Za-z0-9_.-]+")
+"""A peer's name is a file name and, for a shovel, one Zenoh key chunk."""
+
+DEFAULT_HOSTS = ("localhost", "127.0.0.1", "::1")
+CA_CERT = "ca.crt"
+CA_KEY = "ca.key"
+
+
+class PkiError(ValueError):
+    """A PKI operation that cannot be done; the message names the file or name."""
+
+
+@dataclass(frozen=True)
+class CertInfo:
+    """What a certificate says about its holder (read back from the PEM file)."""
+
+    path: Path
+    common_name: str
+    role: str | None
+    not_before: dt.datetime
+    not_after: dt.datetime
+    hosts: tuple[str, ...]
+
+
+def _now() -> dt.datetime:
+    return dt.datetime.now(dt.UTC)
+
+
+def _write_private(path: Path, data: bytes) -> None:
+    """Create ``path`` readable by its owner only (0600), refusing to overwrite."""
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    except FileExistsError:
+        raise PkiError(f"{path}: exists already (remove it to make a new one)") from None
+    except OSError as e:
+        raise PkiError(f"{path}: cannot write: {e.strerror}") from None
+    with os.fdopen(fd, "wb") as f:
+        os.fchmod(f.fileno(), 0o600)
+        f.write(data)
+
+
+def _write_public(path: Path, data: bytes) -> None:
+    if path.exists():
+        raise PkiError(f"{path}: exists already (remove it to make a new one)")
+    try:
+        path.write_bytes(data)
+        path.chmod(0o644)
+    except OSError as e:
+        raise PkiError(f"{path}: cannot write: {e.strerror}") from None
+
+
+def _key_pem(key: ec.EllipticCurvePrivateKey) -> bytes:
+    return key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
+                             serialization.NoEncryption())
+
+
+def init_ca(directory: str | Path, site: str = "shoveld site", days: int = 3650) -> Path:
+    """Make the site CA (``ca.crt``, ``ca.key`` 0600) in ``directory``; its path."""
+    d = Path(directory)
+    if not 0 < days <= 36500:
+        raise PkiError(f"days must be > 0 and at most 36500, got {days}")
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise PkiError(f"{d}: cannot make the folder: {e.strerror}") from None
+    if (d / CA_KEY).exists() or (d / CA_CERT).exists():
+        raise PkiError(f"{d / CA_CERT}: a site CA exists already in {d}")
+    key = ec.generate_private_key(ec.SECP256R1())
+    name = x509.Name([x509.NameAttribute(NameOID.ORGANIZATION_NAME, site),
+                      x509.NameAttribute(NameOID.COMMON_NAME, f"{site} CA")])
+    now = _now()
+    cert = (x509.CertificateBuilder().subject_name(name).issuer_name(name)
+            .public_key(key.public_key()).serial_number(x509.random_serial_number())
+            .not_valid_before(now - dt.timedelta(minutes=5))
+            .not_valid_after(now + dt.timedelta(days=days))
+            .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
+            .add_extension(x509.KeyUsage(digital_signature=False, content_commitment=False,
+                                         key_encipherment=False, data_encipherment=False,
+                                         key_agreement=False, key_cert_sign=True,
+                                         crl_sign=True, encipher_only=False,
+                                         decipher_only=False), critical=True)
+            .add_extension(x509.SubjectKeyIdentifier.from_public_key(key.public_key()),
+                           critical=False)
+            .sign(key, hashes.SHA256()))
+    _write_private(d / CA_KEY, _key_pem(key))
+    _write_public(d / CA_CERT, cert.public_bytes(serialization.Encoding.PEM))
+    return d / CA_CERT
+
+
+def _load_ca(d: Path) -> tuple[x509.Certificate, ec.EllipticCurvePrivateKey]:
+    try:
+        cert = x509.load_pem_x509_certificate((d / CA_CERT).read_bytes())
+        key = serialization.load_pem_private_key((d / CA_KEY).read_bytes(), None)
+    except FileNotFoundError as e:
+        raise PkiError(f"{e.filename}: no site CA here (run 'shoveld pki init --dir {d}' "
+                       "first)") from None
+    except (OSError, ValueError) as e:
+        raise PkiError(f"{d / CA_KEY}: cannot read the site CA: {e}") from None
+    if not isinstance(key, ec.EllipticCurvePrivateKey):
+        raise PkiError(f"{d / CA_KEY}: not an EC key made by 'shoveld pki init'")
+    return cert, key
+
+
+def _san(hosts: tuple[str, ...]) -> x509.SubjectAlternativeName:
+    names: list[x509.GeneralName] = []
+    for h in hosts:
+        try:
+            names.append(x509.IPAddress(ipaddress.ip_address(h)))
+        except ValueError:
+            names.append(x509.DNSName(h))
+    return x509.SubjectAlternativeName(names)
+
+
+def issue(directory: str | Path, name: str, role: str, hosts: tuple[str, ...] = (),
+          days: int = 825, not_before: dt.datetime | None = None) -> tuple[Path, Path]:
+    """Sign a certificate for peer ``name`` of ``role``: ``NAME.crt`` and ``NAME.key``
+    (0600) in ``directory``. Its SANs are localhost, 127.0.0.1, ::1 and ``hosts`` (the
+    addresses others dial it at, for a router or a listening shovel)."""
+    d = Path(directory)
+    if not NAME_RE.fullmatch(name) or name in ("ca",):
+        raise PkiError(f"name {name!r}: use letters, digits, '_', '.', '-' (not 'ca'); "
+                       "for a shovel, its shovel.id")
+    if role not in ROLES:
+        raise PkiError(f"role {role!r}: must be one of {list(ROLES)}")
+    if not 0 < days <= 36500:
+        raise PkiError(f"days must be > 0 and at most 36500, got {days}")
+    ca_cert, ca_key = _load_ca(d)
+    for other in list_certs(d):
+        if other.common_name == name:
+            raise PkiError(f"{other.path}: a certificate for {name!r} exists already "
+                           "(common names must be unique: the access control goes by them)")
+    key = ec.generate_private_key(ec.SECP256R1())
+    org = ca_cert.subject.get_attributes_for_oid(NameOID.ORGANIZATION_NAME)
+    attrs = [x509.NameAttribute(NameOID.ORGANIZATIONAL_UNIT_NAME, role),
+             x509.NameAttribute(NameOID.COMMON_NAME, name)]
+    if org:
+        attrs.insert(0, x509.NameAttribute(NameOID.ORGANIZATION_NAME, str(org[0].value)))
+    start = not_before or (_now() - dt.timedelta(minutes=5))
+    all_hosts = tuple(dict.fromkeys((*DEFAULT_HOSTS, *hosts)))
+    cert = (x509.CertificateBuilder().subject_name(x509.Name(attrs))
+            .issuer_name(ca_cert.subject).public_key(key.public_key())
+            .serial_number(x509.random_serial_number())
+            .not_valid_before(start).not_valid_after(start + dt.timedelta(days=days))
+            .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
+            .add_extension(x509.KeyUsage(digital_signature=True, content_commitment=False,
+                                         key_encipherment=False, data_encipherment=False,
+                                         key_agreement=False, key_cert_sign=False,
+                                         crl_sign=False, encipher_only=False,
+                                         decipher_only=False), critical=True)
+            # every peer both dials (client) and may listen (server)
+            .add_extension(x509.ExtendedKeyUsage([ExtendedKeyUsageOID.SERVER_AUTH,
+                                                  ExtendedKeyUsageOID.CLIENT_AUTH]),
+                           critical=False)
+            .add_extension(_san(all_hosts), critical=False)
+            .add_extension(x509.AuthorityKeyIdentifier.from_issuer_public_key(
+                ca_key.public_key()), critical=False)
+            .sign(ca_key, hashes.SHA256()))
+    crt, kp = d / f"{name}.crt", d / f"{name}.key"
+    _write_private(kp, _key_pem(key))
+    _write_public(crt, cert.public_bytes(serialization.Encoding.PEM))
+    return crt, kp
+
+
+def read_cert(path: str | Path) -> CertInfo:
+    """Read a PEM certificate's holder, role and dates (PkiError names the file)."""
+    p = Path(path)
+    try:
+        data = p.read_bytes()
+    except OSError as e:
+        raise PkiError(f"{p}: cannot read: {e.strerror}") from None
+    try:
+        cert = x509.load_pem_x509_certificate(data)
+    except ValueError:
+        raise PkiError(f"{p}: not a PEM certificate") from None
+    cn = cert.subject.get_attributes_for_oid(NameOID.COMMON_NAME)
+    ou = cert.subject.get_attributes_for_oid(NameOID.ORGANIZATIONAL_UNIT_NAME)
+    try:
+        san = cert.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+        hosts = tuple(str(v) for v in san.get_values_for_type(x509.DNSName)) + tuple(
+            str(v) for v in san.get_values_for_type(x509.IPAddress))
+    except x509.ExtensionNotFound:
+        hosts = ()
+    return CertInfo(path=p, common_name=str(cn[0].value) if cn else "",
+                    role=str(ou[0].value) if ou else None,
+                    not_before=cert.not_valid_before_utc, not_after=cert.not_valid_after_utc,
+                    hosts=hosts)
+
+
+def list_certs(directory: str | Path) -> list[CertInfo]:
+    """The peer certificates issued in ``directory`` (not the CA), by name."""
+    d = Path(directory)
+    if not d.is_dir():
+        raise PkiError(f"{d}: no such folder")
+    return [read_cert(p) for p in sorted(d.glob("*.crt")) if p.name != CA_CERT]
+
+
+def check_key(path: str | Path) -> None:
+    """A readable PEM private key (PkiError names the file and what is wrong)."""
+    p = Path(path)
+    try:
+        data = p.read_bytes()
+    except OSError as e:
+        raise PkiError(f"{p}: cannot read: {e.strerror}") from None
+    try:
+        serialization.load_pem_private_key(data, None)
+    except (ValueError, TypeError) as e:
+        raise PkiError(f"{p}: not an unencrypted PEM private key ({e})") from None
+
+
+def check_cert_dates(info: CertInfo, now: dt.datetime | None = None) -> None:
+    """PkiError if the certificate is expired or not valid yet."""
+    t = now or _now()
+    if t > info.not_after:
+        raise PkiError(f"{info.path}: certificate {info.common_name!r} expired on "
+                       f"{info.not_after:%Y-%m-%d %H:%M} UTC")
+    if t < info.not_before:
+        raise PkiError(f"{info.path}: certificate {info.common_name!r} is not valid before "
+                       f"{info.not_before:%Y-%m-%d %H:%M} UTC (check the clock)")
