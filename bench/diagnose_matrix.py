@@ -22,6 +22,7 @@ import argparse
 import itertools
 import json
 import math
+import os
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any
@@ -80,6 +81,10 @@ def one(job: dict[str, Any]) -> dict[str, Any]:
             "scores": {c.name: round(c.gain, 4) for c in d.selection.steps[0].candidates}}
 
 
+def _key(case: dict[str, Any]) -> str:
+    return json.dumps([case["kind"], case["truth"], case["seed"], case["spec"]], sort_keys=True)
+
+
 def run_all(jobs: list[dict[str, Any]], workers: int, progress: str | None
             ) -> list[dict[str, Any]]:
     """Every case on ``workers`` processes; each appended to ``progress`` as it ends."""
@@ -103,7 +108,8 @@ def main() -> None:
     ap.add_argument("--load", help="print the matrix of cases saved by --progress or --json "
                                    "instead of running them")
     ap.add_argument("--progress", help="append each case to this file (JSON lines) as it "
-                                       "ends, so a long run that is stopped keeps what it did")
+                                       "ends; a run given the same file again skips the "
+                                       "cases it holds (resume)")
     ap.add_argument("--ideal", action="store_true",
                     help="the ideal simulator (the old matrix); default: realistic machines, "
                          "one drawn per case")
@@ -145,7 +151,14 @@ def main() -> None:
         args.seeds = max(sum(1 for r in results if r["kind"] == "single" and r["truth"] == n)
                          for n in names)
     else:
-        results = run_all(jobs, args.jobs, args.progress)
+        done: list[dict[str, Any]] = []
+        if args.progress and os.path.exists(args.progress):
+            # resume: the cases a stopped run already finished are not run again
+            with open(args.progress) as f:
+                done = [json.loads(line) for line in f if line.strip()]
+            keys = {_key(r) for r in done}
+            jobs = [j for j in jobs if _key(j) not in keys]
+        results = done + run_all(jobs, args.jobs, args.progress)
     print(f"{'ideal simulator' if args.ideal else 'realistic machines'}; effects the base "
           f"model carries ({', '.join(sorted(MODELLED_BY_BASE))}) count as right when "
           "nothing is named")
