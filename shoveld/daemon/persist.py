@@ -71,11 +71,17 @@ def connect(path: str | Path, readonly: bool = False) -> sqlite3.Connection:
     if readonly:
         if not p.exists():
             raise FileNotFoundError(f"{p}: no pass log here (has the daemon run?)")
-        con = sqlite3.connect(f"file:{p}?mode=ro", uri=True, timeout=5.0,
+        # as_uri() percent-encodes the path: a '#' or '?' in a folder name would
+        # otherwise end the file name and open (or create) another file
+        con = sqlite3.connect(f"{p.resolve().as_uri()}?mode=ro", uri=True, timeout=5.0,
                               check_same_thread=False)
         con.execute("PRAGMA busy_timeout = 5000")
         return con
-    p.parent.mkdir(parents=True, exist_ok=True)
+    if not p.parent.exists():
+        # owner-only whatever the umask of what starts us (a systemd unit's UMask, a
+        # shell's): the pass log is the mine's production record
+        p.parent.mkdir(parents=True, mode=0o700)
+        p.parent.chmod(0o700)
     con = sqlite3.connect(str(p), timeout=5.0, isolation_level=None, check_same_thread=False)
     con.execute("PRAGMA busy_timeout = 5000")
     mode = con.execute("PRAGMA journal_mode = WAL").fetchone()[0]

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import os
 import sqlite3
+import stat
 from pathlib import Path
 from typing import Any
 
@@ -120,3 +122,25 @@ def test_the_boot_stamp_goes_with_the_last_pass(tmp_path: Path) -> None:
     log.write_pass(p(2, 1), T0 + 10, T0 + 18, 62000.0)
     assert log.restore().last_dump_boot is None
     assert log.restore().last_dump_unix == T0 + 18
+
+
+@pytest.mark.parametrize("folder", ["shift#2", "what?now", "50%"])
+def test_reader_opens_the_log_whatever_the_folder_is_called(tmp_path: Path,
+                                                            folder: str) -> None:
+    # A '#' or '?' in an unescaped URI ends the file name: the reader would open (or
+    # fail on) another file than the daemon writes.
+    state = tmp_path / folder
+    log = PassLog(db_path(state), "s1")
+    log.write_pass(p(1, 1), T0, T0 + 8, 136000.0)
+    log.close()
+    assert [r["pass"] for r in read_passes(db_path(state))] == [1]
+    assert sorted(x.name for x in tmp_path.iterdir()) == [folder]  # nothing else created
+
+
+def test_a_new_state_folder_is_owner_only_whatever_the_umask(tmp_path: Path) -> None:
+    old = os.umask(0o002)
+    try:
+        PassLog(db_path(tmp_path / "state"), "s1").close()
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE((tmp_path / "state").stat().st_mode) == 0o700
