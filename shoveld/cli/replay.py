@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import sys
 import tempfile
 import threading
@@ -31,13 +32,15 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "machine allows. Passes and trucks are printed as they are committed.")
     p.add_argument("capture", metavar="CAPTURE", help="capture folder (manifest.json)")
     mode = p.add_mutually_exclusive_group()
-    mode.add_argument("--speed", type=float, default=None,
-                      help="times the recorded pace (default 1.0)")
+    mode.add_argument("--speed", type=_pace, default=None,
+                      help="times the recorded pace, > 0 (default 1.0)")
     mode.add_argument("--fast", action="store_true", help="as fast as possible, deterministic")
     p.add_argument("--config", default=None,
                    help="daemon config for params, loop, engine, truck and Zenoh settings "
                         "(its devices are ignored: the capture's are used)")
-    p.add_argument("--params", default=None, help="params file (overrides the config's)")
+    p.add_argument("--params", default=None,
+                   help="params file (overrides the config's; default: the capture folder's "
+                        "params.toml when neither this nor --config is given)")
     p.add_argument("--state-dir", default=None,
                    help="pass log directory (default: a temporary one, removed at the end)")
     p.add_argument("--id", default=None, help="shovel id on Zenoh (default: the config's, "
@@ -59,6 +62,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _pace(text: str) -> float:
+    """--speed: a finite number of times the recorded pace, above zero."""
+    try:
+        x = float(text)
+    except ValueError:
+        x = math.nan
+    if not (math.isfinite(x) and x > 0):
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: expected a number above 0 (times the recorded pace, e.g. 1 or 20); "
+            "--fast replays as fast as the machine allows")
+    return x
+
+
 def build_config(args: argparse.Namespace, state_dir: Path) -> tuple[DaemonConfig, ModelParams]:
     """The daemon config and params for a replay, from --config and the overrides."""
     import dataclasses
@@ -71,7 +87,11 @@ def build_config(args: argparse.Namespace, state_dir: Path) -> tuple[DaemonConfi
             cfg = load_config(args.config, check_drivers=False, require_devices=False)
         else:
             if not args.params:
-                raise CliError("give --params FILE (or --config FILE naming one)")
+                own = Path(args.capture) / "params.toml"
+                if not own.is_file():
+                    raise CliError(f"{args.capture}: no params.toml in the capture; give "
+                                   "--params FILE (or --config FILE naming one)")
+                args.params = str(own)
             cfg = parse_config({"shovel": {"id": "replay", "params": str(args.params)}},
                                "<replay>", require_devices=False)
     except ConfigError as e:

@@ -94,3 +94,26 @@ def test_paced_replay_through_the_virtual_hardware(tmp_path: Path, params: Model
         rr.close()
     check_passes(got, 1, rel=0.02)
     assert figures["speed_x"] > 3
+
+
+def test_replay_takes_the_capture_folders_own_params(tmp_path: Path) -> None:
+    # no --params, no --config: the capture's params.toml, and the same passes
+    port = free_port()
+    r = subprocess.run(
+        [sys.executable, "-m", "shoveld", "replay", str(CAPTURE), "--fast", "--state-dir",
+         str(tmp_path / "state"), "--listen", f"tcp/127.0.0.1:{port}", "--json"],
+        capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    csv = subprocess.run([sys.executable, "-m", "shoveld", "passes", "--state-dir",
+                          str(tmp_path / "state"), "--csv"], capture_output=True, text=True,
+                         check=True).stdout.splitlines()
+    assert len(csv) - 1 == len(EXPECTED["passes"])
+
+
+@pytest.mark.parametrize("speed", ["0", "-2", "nan", "fast"])
+def test_replay_refuses_a_pace_that_is_not_above_zero(speed: str) -> None:
+    r = subprocess.run([sys.executable, "-m", "shoveld", "replay", str(CAPTURE), "--speed",
+                        speed], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2
+    assert "Traceback" not in r.stderr
+    assert "--speed" in r.stderr and "expected a number above 0" in r.stderr
