@@ -46,7 +46,7 @@ class EngineConfig:
     window_s: float = 0.5
     """Zero-phase window of the payload equations (identification uses the same)."""
     batch: int = 10
-    """Samples per payload-filter update (one model evaluation and one filterpy update
+    """Samples per payload-filter update (one model evaluation and one filter update
     per block; the live payload moves in steps of this many ticks)."""
     settle_s: float = 0.4
     """Samples this soon after leaving the bank are not used (bank contact fades)."""

@@ -1,7 +1,10 @@
 """Causal joint-rate estimation for the live loop: a Kalman filter per joint.
 
-Each joint is a constant-acceleration (white-jerk) process observed in position;
-filterpy's ``KalmanFilter`` does the work. The jerk intensity sets the lag/noise
+Each joint is a constant-acceleration (white-jerk) process observed in position,
+with a three-state Kalman filter written out on numpy (:class:`Kalman3`): filterpy's
+``KalmanFilter`` gives the same numbers (``tests/engine/test_filters.py``) but its
+import pulls in scipy.stats, 0.6-2 s of every daemon start, for a filter whose whole
+algebra is a dozen lines (``bench/filters.py``). The jerk intensity sets the lag/noise
 trade-off (``bench/kinematics_tradeoff.py`` measures it); the default was chosen
 there. The filter coasts through missing samples (predict only) and resets after
 a long gap.
@@ -13,8 +16,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from filterpy.common import Q_discrete_white_noise
-from filterpy.kalman import KalmanFilter
 
 
 @dataclass(frozen=True)
@@ -31,19 +32,53 @@ CROWD = JointFilterConfig(meas_std=0.002, jerk_std=4.0)
 SWING = JointFilterConfig(meas_std=math.radians(0.1), jerk_std=1.0)
 
 
+def white_jerk_q(dt: float, var: float) -> np.ndarray:
+    """Process noise of a constant-acceleration model whose acceleration changes by a
+    piecewise-constant white step of variance ``var`` per sample (filterpy's
+    ``Q_discrete_white_noise(dim=3)``)."""
+    g = np.array([0.5 * dt * dt, dt, 1.0])
+    return var * np.outer(g, g)
+
+
+class Kalman3:
+    """A linear Kalman filter with a scalar measurement of the first state; the
+    covariance update in Joseph form (stable with the tiny variances of a settled
+    filter), as filterpy's ``KalmanFilter`` does it."""
+
+    def __init__(self, F: np.ndarray, Q: np.ndarray, r: float) -> None:
+        self.F = F
+        self.Q = Q
+        self.r = r
+        n = F.shape[0]
+        self.x = np.zeros(n)
+        self.P = np.eye(n)
+        self.K = np.zeros(n)
+        self._eye = np.eye(n)
+
+    def predict(self) -> None:
+        self.x = self.F @ self.x
+        self.P = self.F @ self.P @ self.F.T + self.Q
+
+    def update(self, z: float) -> None:
+        P = self.P
+        s = P[0, 0] + self.r
+        k = P[:, 0] / s
+        self.x = self.x + k * (z - self.x[0])
+        ikh = self._eye.copy()
+        ikh[:, 0] -= k
+        self.P = ikh @ P @ ikh.T + self.r * np.outer(k, k)
+        self.K = k
+
+
 class JointFilter:
     """Position, rate and acceleration of one joint from noisy positions, causally."""
 
     def __init__(self, cfg: JointFilterConfig, dt: float) -> None:
         self.cfg = cfg
         self.dt = dt
-        kf = KalmanFilter(dim_x=3, dim_z=1)
-        kf.F = np.array([[1.0, dt, 0.5 * dt * dt], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
-        kf.H = np.array([[1.0, 0.0, 0.0]])
-        kf.R = np.array([[cfg.meas_std**2]])
-        # filterpy's piecewise model takes the variance of the acceleration change per step.
-        kf.Q = Q_discrete_white_noise(dim=3, dt=dt, var=(cfg.jerk_std * dt) ** 2)
-        self.kf = kf
+        F = np.array([[1.0, dt, 0.5 * dt * dt], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
+        # The piecewise model takes the variance of the acceleration change per step.
+        self.kf = Kalman3(F, white_jerk_q(dt, (cfg.jerk_std * dt) ** 2), cfg.meas_std**2)
         self._last_t: float | None = None
         self._coast = 0.0
         self._steady: tuple[float, float, float] | None = None
@@ -53,7 +88,7 @@ class JointFilter:
 
     def reset(self, z: float) -> None:
         self._leave_steady()
-        self.kf.x = np.array([[z], [0.0], [0.0]])
+        self.kf.x = np.array([z, 0.0, 0.0])
         self.kf.P = np.diag([self.cfg.meas_std**2, 1.0, 10.0])
 
     def update(self, t: float, z: float) -> tuple[float, float, float]:
@@ -83,12 +118,12 @@ class JointFilter:
                 # Converged: the gain is constant from here on (steady-state Kalman filter),
                 # so the update needs no matrix algebra until a gap disturbs it.
                 k = self.kf.K
-                self._steady = (float(k[0, 0]), float(k[1, 0]), float(k[2, 0]))
+                self._steady = (float(k[0]), float(k[1]), float(k[2]))
                 x = self.kf.x
-                self._qva = [float(x[0, 0]), float(x[1, 0]), float(x[2, 0])]
+                self._qva = [float(x[0]), float(x[1]), float(x[2])]
             self._prev_p = p00
         x = self.kf.x
-        return float(x[0, 0]), float(x[1, 0]), float(x[2, 0])
+        return float(x[0]), float(x[1]), float(x[2])
 
     def _steady_update(self, z: float) -> tuple[float, float, float]:
         """Steady-state update on the state held as Python floats (the same double
@@ -106,10 +141,9 @@ class JointFilter:
         return q, v, a
 
     def _leave_steady(self) -> None:
-        """Back to filterpy's full update: put the float state into ``kf.x``."""
+        """Back to the full update: put the float state into ``kf.x``."""
         if self._steady is not None:
-            x = self.kf.x
-            x[0, 0], x[1, 0], x[2, 0] = self._qva
+            self.kf.x = np.array(self._qva)
             self._steady = None
 
     def state(self) -> tuple[float, float, float]:
@@ -118,4 +152,4 @@ class JointFilter:
             q, v, a = self._qva
             return q, v, a
         x = self.kf.x
-        return float(x[0, 0]), float(x[1, 0]), float(x[2, 0])
+        return float(x[0]), float(x[1]), float(x[2])

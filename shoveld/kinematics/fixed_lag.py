@@ -16,7 +16,8 @@ from collections import deque
 from typing import Generic, TypeVar
 
 import numpy as np
-from scipy.signal import savgol_coeffs
+
+from shoveld.kinematics.savgol import savgol_coeffs
 
 T = TypeVar("T")
 

@@ -9,8 +9,8 @@ segments; samples within half a window of a gap are marked invalid.
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import savgol_filter
 
+from shoveld.kinematics.savgol import savgol_filter
 from shoveld.model.kin import Kinematics
 from shoveld.signals.table import SignalsTable
 
@@ -33,7 +33,7 @@ def savgol_derivatives(y: np.ndarray, dt: float, window: int, valid: np.ndarray
             continue
         seg = y[a:b]
         for k in range(3):
-            out[k][a:b] = savgol_filter(seg, window, 3, deriv=k, delta=dt, mode="interp")
+            out[k][a:b] = savgol_filter(seg, window, 3, deriv=k, delta=dt)
         half = window // 2
         ok[a + half:b - half] = True
     return out[0], out[1], out[2], ok

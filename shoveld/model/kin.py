@@ -59,7 +59,7 @@ class Kinematics:
         The cubic fit over ``window`` samples minus the centre sample's own share: exact
         for currents that are cubic over the window, independent of the centre's noise.
         """
-        from scipy.signal import savgol_coeffs
+        from shoveld.kinematics.savgol import savgol_coeffs
 
         window = max(5, window | 1)
         c = savgol_coeffs(window, 3, use="conv")

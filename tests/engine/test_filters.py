@@ -1,0 +1,145 @@
+"""The engine's own numerical filters against the libraries they replace.
+
+Savitzky-Golay, the joints' Kalman filters and the payload's recursive least squares
+are written on numpy so that the daemon starts without scipy (``bench/startup.py``);
+scipy's and filterpy's implementations stay the reference they must agree with.
+"""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from filterpy.common import Q_discrete_white_noise
+from filterpy.kalman import KalmanFilter
+from scipy.signal import savgol_coeffs as scipy_coeffs
+from scipy.signal import savgol_filter as scipy_filter
+
+from shoveld.kinematics.causal import HANDLE, JointFilter, Kalman3, white_jerk_q
+from shoveld.kinematics.savgol import savgol_coeffs, savgol_filter
+from shoveld.payload.rls import PayloadRls, RlsConfig
+
+
+@pytest.mark.parametrize("window", [5, 11, 25, 51])
+@pytest.mark.parametrize("deriv", [0, 1, 2])
+def test_savgol_matches_scipy(window: int, deriv: int) -> None:
+    rng = np.random.default_rng(window + deriv)
+    y = np.cumsum(rng.normal(size=400)) + np.sin(np.arange(400) / 7.0)
+    for use in ("conv", "dot"):
+        ref = scipy_coeffs(window, 3, deriv=deriv, delta=0.02, use=use)
+        assert np.allclose(savgol_coeffs(window, 3, deriv, 0.02, use=use), ref,
+                           rtol=1e-9, atol=1e-12 * np.abs(ref).max())
+    ref = scipy_filter(y, window, 3, deriv=deriv, delta=0.02, mode="interp")
+    got = savgol_filter(y, window, 3, deriv, 0.02)
+    assert np.max(np.abs(got - ref)) <= 1e-10 * np.max(np.abs(ref))
+
+
+def test_savgol_refuses_a_window_it_cannot_fit() -> None:
+    with pytest.raises(ValueError, match="window"):
+        savgol_filter(np.zeros(4), 5, 3)
+    with pytest.raises(ValueError, match="order"):
+        savgol_coeffs(3, 3)
+
+
+def test_white_jerk_noise_is_filterpys() -> None:
+    assert np.allclose(white_jerk_q(0.01, 2.5), Q_discrete_white_noise(dim=3, dt=0.01, var=2.5))
+
+
+def _filterpy_joint(dt: float, zs: np.ndarray) -> np.ndarray:
+    """The joint filter as it was built on filterpy: predict, then update when z is
+    not NaN (the test sequence has no gap longer than the coast limit)."""
+    cfg = HANDLE
+    kf = KalmanFilter(dim_x=3, dim_z=1)
+    kf.F = np.array([[1.0, dt, 0.5 * dt * dt], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
+    kf.H = np.array([[1.0, 0.0, 0.0]])
+    kf.R = np.array([[cfg.meas_std**2]])
+    kf.Q = Q_discrete_white_noise(dim=3, dt=dt, var=(cfg.jerk_std * dt) ** 2)
+    kf.x = np.array([[zs[0]], [0.0], [0.0]])
+    kf.P = np.diag([cfg.meas_std**2, 1.0, 10.0])
+    out = [(zs[0], 0.0, 0.0)]
+    for z in zs[1:]:
+        kf.predict()
+        if not math.isnan(z):
+            kf.update(z)
+        out.append((float(kf.x[0, 0]), float(kf.x[1, 0]), float(kf.x[2, 0])))
+    return np.array(out)
+
+
+def test_joint_filter_matches_filterpy_through_gaps() -> None:
+    dt = 0.01
+    t = np.arange(3000) * dt
+    rng = np.random.default_rng(3)
+    zs = 0.4 * np.sin(0.7 * t) + rng.normal(0, HANDLE.meas_std, len(t))
+    zs[1200:1230] = np.nan  # a 0.3 s dropout: the filter coasts, then leaves its steady state
+    jf = JointFilter(HANDLE, dt)
+    got = np.array([jf.update(float(ti), float(z)) for ti, z in zip(t, zs, strict=True)])
+    ref = _filterpy_joint(dt, zs)
+    scale = np.max(np.abs(ref), axis=0)
+    # Once settled, the joint filter freezes its gain (steady-state Kalman filter), so it
+    # is the full filter only to about 1e-7 of the signal.
+    assert np.all(np.max(np.abs(got - ref), axis=0) <= 1e-6 * scale)
+
+
+def test_kalman3_step_is_filterpys_step() -> None:
+    dt = 0.02
+    F = np.array([[1.0, dt, 0.5 * dt * dt], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
+    Q = white_jerk_q(dt, 0.3)
+    ours = Kalman3(F, Q, 1e-4)
+    ref = KalmanFilter(dim_x=3, dim_z=1)
+    ref.F, ref.Q, ref.R, ref.H = F, Q, np.array([[1e-4]]), np.array([[1.0, 0.0, 0.0]])
+    ours.x, ref.x = np.array([0.1, 0.2, 0.3]), np.array([[0.1], [0.2], [0.3]])
+    ours.P, ref.P = np.diag([1.0, 2.0, 3.0]), np.diag([1.0, 2.0, 3.0])
+    for z in np.random.default_rng(5).normal(size=200):
+        ours.predict()
+        ref.predict()
+        ours.update(float(z))
+        ref.update(float(z))
+        assert np.allclose(ours.x, ref.x[:, 0], rtol=1e-12, atol=1e-14)
+        assert np.allclose(ours.P, ref.P, rtol=1e-10, atol=1e-16)
+
+
+def _filterpy_rls(noise: tuple[float, float], dt: float, cfg: RlsConfig,
+                  blocks: list[tuple[np.ndarray, np.ndarray]]) -> tuple[float, float, float]:
+    kf = KalmanFilter(dim_x=1, dim_z=2)
+    kf.F = np.eye(1)
+    kf.x = np.array([[cfg.prior_kg]])
+    kf.P = np.array([[cfg.prior_std_kg**2]])
+    r = np.square(np.asarray(noise))
+    nis = 0.0
+    for a, b in blocks:
+        n = len(a)
+        kf.Q = np.array([[(cfg.forgetting_std_kg_per_s**2) * dt * n]])
+        kf.predict()
+        kf.update(b.reshape(-1, 1), R=np.diag(np.tile(r, n)), H=a.reshape(-1, 1))
+        nis += float((kf.y.T @ kf.SI @ kf.y)[0, 0])
+    return float(kf.x[0, 0]), float(kf.P[0, 0]), nis
+
+
+@pytest.mark.parametrize("forgetting", [0.0, 300.0])
+def test_payload_rls_matches_filterpy(forgetting: float) -> None:
+    rng = np.random.default_rng(11)
+    cfg = RlsConfig(forgetting_std_kg_per_s=forgetting)
+    noise = (3.0, 2.0)
+    blocks = []
+    for _ in range(30):
+        a = rng.uniform(0.01, 0.05, (10, 2))
+        b = a * 21000.0 + rng.normal(0, 1, (10, 2)) * noise
+        blocks.append((a, b))
+    rls = PayloadRls(noise, 0.01, cfg)
+    for a, b in blocks:
+        rls.update(a, b)
+    x, p, nis = _filterpy_rls(noise, 0.01, cfg, blocks)
+    assert rls.payload_kg == pytest.approx(x, rel=1e-10)
+    assert rls.p == pytest.approx(p, rel=1e-8)
+    assert rls._nis_sum == pytest.approx(nis, rel=1e-8)
+
+
+def test_the_daemon_and_the_engine_start_without_scipy_or_filterpy() -> None:
+    code = ("import sys, shoveld.daemon.service, shoveld.engine.loop, shoveld.engine.offline;"
+            "print(sorted({m.split('.')[0] for m in sys.modules} & {'scipy', 'filterpy'}))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.strip()
+    assert out == "[]"
