@@ -53,10 +53,10 @@ def parse_effect_args(items: list[str]) -> dict[str, float | None]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from shoveld.signals.table import write_table
+    from shoveld.signals.table import write_header, write_rows, write_table
     from shoveld.sim import effects as fx
     from shoveld.sim.machine import Machine
-    from shoveld.sim.scenario import simulate_calibration, simulate_cycles
+    from shoveld.sim.scenario import iter_cycles, simulate_calibration
 
     if args.list_effects:
         for name, cls in sorted(fx.SIM_EFFECTS.items()):
@@ -80,11 +80,30 @@ def run(args: argparse.Namespace) -> int:
             kw = {"payload_range": tuple(args.payload_range), "truck_target_kg": None}
         else:
             kw = {"truck_target_kg": args.truck_target}
-        res = simulate_cycles(args.passes, args.seed, verified_fraction=args.verified_fraction,
-                              rate_hz=args.rate, effects=effects, machine=machine, **kw)
-    else:
-        res = simulate_calibration(args.load, args.seed, rate_hz=args.rate, effects=effects,
-                                   machine=machine)
+        # Streamed: a segment of whole trucks at a time goes to disk, so memory does not
+        # grow with the number of passes (bench/sim_speed.py).
+        out = Path(args.out)
+        truth: dict = {}
+        passes: list = []
+        samples, end = 0, 0.0
+        with open(out, "w", encoding="utf-8", newline="\n") as f:
+            for part in iter_cycles(args.passes, args.seed,
+                                    verified_fraction=args.verified_fraction,
+                                    rate_hz=args.rate, effects=effects, machine=machine, **kw):
+                if not truth:
+                    truth = part.truth
+                    write_header(f, part.table.meta)
+                write_rows(f, part.table)
+                passes += [p.as_dict() for p in part.passes]
+                samples += len(part.table)
+                end = float(part.table.time[-1])
+        Path(str(out) + ".truth.json").write_text(json.dumps({**truth, "passes": passes},
+                                                             indent=1))
+        print(f"wrote {out} ({samples} samples, {end:.0f} s, {len(passes)} passes) and "
+              f"{out}.truth.json")
+        return 0
+    res = simulate_calibration(args.load, args.seed, rate_hz=args.rate, effects=effects,
+                               machine=machine)
     out = Path(args.out)
     write_table(out, res.table)
     Path(str(out) + ".truth.json").write_text(json.dumps(res.truth_json(), indent=1))

@@ -14,6 +14,7 @@ import math
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TextIO
 
 import numpy as np
 
@@ -220,10 +221,19 @@ def iter_rows(table: SignalsTable) -> Iterator[str]:
 
 def write_table(path: str | Path, table: SignalsTable) -> None:
     """Write ``table`` as ``shovel-signals/1`` (metadata lines, header, rows)."""
-    meta = {"format": FORMAT_NAME, **table.meta}
     with open(path, "w", encoding="utf-8", newline="\n") as f:
-        for k, v in meta.items():
-            f.write(f"# {k}: {v}\n")
-        f.write(",".join(COLUMN_NAMES) + "\n")
-        for line in iter_rows(table):
-            f.write(line + "\n")
+        write_header(f, table.meta)
+        write_rows(f, table)
+
+
+def write_header(f: TextIO, meta: dict[str, str]) -> None:
+    """The metadata lines and the column header (a streamed table then takes
+    :func:`write_rows` once per part)."""
+    for k, v in {"format": FORMAT_NAME, **meta}.items():
+        f.write(f"# {k}: {v}\n")
+    f.write(",".join(COLUMN_NAMES) + "\n")
+
+
+def write_rows(f: TextIO, table: SignalsTable) -> None:
+    for line in iter_rows(table):
+        f.write(line + "\n")

@@ -246,13 +246,23 @@ class Machine:
         return d
 
 
-def slow_wave(t: np.ndarray, amplitude: float, period_s: float, rng: np.random.Generator
-              ) -> np.ndarray:
+def wave_phases(rng: np.random.Generator) -> np.ndarray:
+    """The random phases of one :func:`slow_wave` (drawn once per run, so a run simulated
+    in segments wanders continuously across them)."""
+    return np.array([rng.uniform(0, 2 * math.pi) for _ in range(3)])
+
+
+def slow_wave(t: np.ndarray, amplitude: float, period_s: float, rng: np.random.Generator,
+              phases: np.ndarray | None = None) -> np.ndarray:
     """A smooth random wander of about ``amplitude`` over ``period_s``: three sines of
-    random phase at the period and two shorter ones, scaled to the amplitude's RMS."""
+    random phase at the period and two shorter ones, scaled to the amplitude's RMS.
+    ``phases`` (from :func:`wave_phases`) fixes them; otherwise they are drawn from
+    ``rng``."""
     if amplitude == 0.0:
         return np.zeros_like(t)
+    if phases is None:
+        phases = wave_phases(rng)
     out = np.zeros_like(t)
-    for k, w in ((1.0, 1.0), (2.3, 0.5), (4.1, 0.25)):
-        out += w * np.sin(2 * math.pi * k * t / period_s + rng.uniform(0, 2 * math.pi))
+    for (k, w), ph in zip(((1.0, 1.0), (2.3, 0.5), (4.1, 0.25)), phases, strict=True):
+        out += w * np.sin(2 * math.pi * k * t / period_s + ph)
     return amplitude * out / math.sqrt(0.5 * (1 + 0.25 + 0.0625))

@@ -9,6 +9,7 @@ phase times per pass) is returned beside the table.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -16,7 +17,7 @@ import numpy as np
 
 from shoveld.cycle.phases import PHASES
 from shoveld.signals.table import SignalsTable
-from shoveld.sim.machine import Channel, Installation, Machine, slow_wave
+from shoveld.sim.machine import Channel, Installation, Machine, slow_wave, wave_phases
 from shoveld.sim.plant import Motion, Plant, PlantParams
 
 FINE_HZ = 500.0
@@ -208,8 +209,12 @@ def resolve_machine(machine: Machine | None, params: PlantParams | None,
 
 
 def measure(motion: Motion, ctx: dict[str, Any], rate_hz: float, machine: Machine,
-            rng: np.random.Generator, effects: list[Any]) -> dict[str, np.ndarray]:
-    """Sample the true signals at the logger's rate, through the machine's sensors."""
+            rng: np.random.Generator, effects: list[Any], t_offset: float = 0.0,
+            waves: dict[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
+    """Sample the true signals at the logger's rate, through the machine's sensors.
+
+    ``t_offset`` is the segment's start in the run, ``waves`` the phases of the run's
+    slow wanders (drawn here for the first segment, and kept in ``ctx["waves"]``)."""
     dt = float(motion.t[1] - motion.t[0])
     step = max(1, int(round(1.0 / (rate_hz * dt))))
     idx = np.arange(0, len(motion.t), step)
@@ -217,12 +222,20 @@ def measure(motion: Motion, ctx: dict[str, Any], rate_hz: float, machine: Machin
     pp = machine.plant
     s = machine.sensors
     t = motion.t[idx]
-    split = s.split + slow_wave(t, s.split_wander, s.split_period_s, rng)
-    drift = slow_wave(t, s.handle_drift_deg, s.drift_period_s, rng)
+    if waves is None:
+        waves = {}
+        for name, amp in (("split", s.split_wander), ("drift", s.handle_drift_deg)):
+            if amp != 0.0:  # (a flat wave draws nothing)
+                waves[name] = wave_phases(rng)
+    ctx["waves"] = waves
+    split = s.split + slow_wave(t + t_offset, s.split_wander, s.split_period_s, rng,
+                                waves.get("split"))
+    drift = slow_wave(t + t_offset, s.handle_drift_deg, s.drift_period_s, rng,
+                      waves.get("drift"))
     i_h = ctx["i_h"][idx]
     ones = np.ones(n)
     cols = {
-        "time_s": t,
+        "time_s": t + t_offset,
         "handle_deg": np.degrees(motion.th[idx]) + drift + rng.normal(0, s.handle_deg, n),
         "crowd_m": motion.d[idx] + rng.normal(0, s.crowd_m, n),
         "swing_deg": np.degrees(motion.swing[idx]) + rng.normal(0, s.swing_deg, n),
@@ -275,81 +288,126 @@ class SimResult:
     table: SignalsTable
     passes: list[PassTruth]
     truth: dict[str, Any]
-    motion: Motion
-    ctx: dict[str, Any]
+    motion: Motion | None
+    """The true motion and the plant's context (None for a run simulated in several
+    segments: see :func:`iter_cycles`)."""
+    ctx: dict[str, Any] | None
 
     def truth_json(self) -> dict[str, Any]:
         return {**self.truth, "passes": [p.as_dict() for p in self.passes]}
 
 
 def _finish(tl: Timeline, rng: np.random.Generator, machine: Machine, effects: list[Any],
-            rate_hz: float, meta: dict[str, str]) -> tuple[SignalsTable, Motion, dict[str, Any]]:
+            rate_hz: float, meta: dict[str, str], t_offset: float = 0.0,
+            waves: dict[str, np.ndarray] | None = None
+            ) -> tuple[SignalsTable, Motion, dict[str, Any]]:
     pp = machine.plant
     motion = motion_from_timeline(tl, rng, pp.boom_deg)
     ctx = Plant(pp, effects, machine.drive).run(motion)
-    cols = measure(motion, ctx, rate_hz, machine, rng, effects)
+    cols = measure(motion, ctx, rate_hz, machine, rng, effects, t_offset, waves)
     name = "sim-ph2100" if not machine.realistic else f"sim-ph2100-m{machine.seed}"
     table = SignalsTable.from_arrays(meta={"sample_rate_hz": f"{rate_hz:g}",
                                            "shovel": name, **meta}, **cols)
     return table, motion, ctx
 
 
-def simulate_cycles(n_passes: int, seed: int = 0, *, payload_range: tuple[float, float] = (
-        3000.0, 35000.0), truck_target_kg: float | None = None, verified_fraction: float = 0.0,
-        rate_hz: float = 50.0, params: PlantParams | None = None, effects: list[Any] | None = None,
-        noise: SensorNoise | None = None, payloads: list[float] | None = None,
-        machine: Machine | None = None) -> SimResult:
-    """Dig cycles loading trucks.
+CHUNK_PASSES = 32
+"""Passes simulated at once: a longer run is simulated and written truck by truck in
+segments of about this many passes, so its memory does not grow with its length."""
+
+
+def simulate_cycles(n_passes: int, seed: int = 0, **kw: Any) -> SimResult:
+    """Dig cycles loading trucks, as one table (see :func:`iter_cycles`).
 
     With ``truck_target_kg`` the passes of a truck are drawn so the truck fills to about
     the target, and the trucks are separated by an exchange pause; otherwise every pass
     draws its payload from ``payload_range`` and a truck change comes every 4 passes.
     """
-    rng = np.random.default_rng(seed)
+    parts = list(iter_cycles(n_passes, seed, **kw))
+    if len(parts) == 1:
+        return parts[0]
+    cols = {n: np.concatenate([p.table.columns[n] for p in parts])
+            for n in parts[0].table.columns}
+    table = SignalsTable.from_arrays(meta=dict(parts[0].table.meta), **cols)
+    return SimResult(table, [q for p in parts for q in p.passes], parts[0].truth, None, None)
+
+
+def iter_cycles(n_passes: int, seed: int = 0, *, payload_range: tuple[float, float] = (
+        3000.0, 35000.0), truck_target_kg: float | None = None, verified_fraction: float = 0.0,
+        rate_hz: float = 50.0, params: PlantParams | None = None, effects: list[Any] | None = None,
+        noise: SensorNoise | None = None, payloads: list[float] | None = None,
+        machine: Machine | None = None, chunk_passes: int = CHUNK_PASSES
+        ) -> Iterator[SimResult]:
+    """Dig cycles in segments of whole trucks, each about ``chunk_passes`` passes long.
+
+    A segment ends in a truck exchange (the dipper at rest, the field settled), and the
+    next starts from that pose at that time, with the run's sensors and their slow
+    wanders going on continuously; its noise comes from its own stream (seed, segment).
+    A run of at most ``chunk_passes`` passes is one segment.
+    """
     machine = resolve_machine(machine, params, noise)
     effects = effects or []
-    tl = Timeline()
-    tl.go(3.0, "idle")
-    passes: list[PassTruth] = []
     truck, in_truck, truck_load = 1, 0, 0.0
-    for k in range(n_passes):
-        if payloads is not None:
-            m = float(payloads[k])
-        elif truck_target_kg:
-            left = truck_target_kg - truck_load
-            m = float(np.clip(rng.normal(0.235, 0.025) * truck_target_kg, 3000.0,
-                              min(RATED_PAYLOAD_KG, max(left * 1.08, 3000.0))))
-        else:
-            m = float(rng.uniform(*payload_range))
-        before = len(tl.phases)
-        dig_cycle(tl, rng, m, swing_to=float(rng.uniform(70, 110)))
-        ph: dict[str, tuple[float, float]] = {}
-        for t0, t1, name in tl.phases[before:]:
-            ph[name] = (t0, t1) if name not in ph else (ph[name][0], t1)
-        verified = bool(rng.uniform() < verified_fraction)
-        passes.append(PassTruth(k + 1, truck, m, ph, verified))
-        in_truck += 1
-        truck_load += m
-        full = (truck_load >= 0.9 * truck_target_kg) if truck_target_kg else in_truck >= 4
-        if full and k < n_passes - 1:
-            tl.go(rng.uniform(25.0, 40.0), "idle")
-            truck, in_truck, truck_load = truck + 1, 0, 0.0
-        else:
-            tl.go(rng.uniform(0.5, 2.0), "idle")
-    table, motion, ctx = _finish(tl, rng, machine, effects, rate_hz, {})
-    t = table.time
-    col = table.columns["payload_kg"]
-    for p in passes:
-        if p.verified:
-            col[(t >= p.phases["lift"][0]) & (t < p.phases["dump"][0] + 0.3)] = p.payload_kg
-        info = payload_information(ctx, machine, p.phases["lift"][0] + 0.4,
-                                   p.phases["swing"][1])
-        p.crb_kg = 1.0 / math.sqrt(info) if info > 0 else math.inf
-    truth = {"scenario": "cycles", "seed": seed, "params": machine.plant.as_dict(),
-             "machine": machine.describe(),
-             "effects": {e.name: e.magnitude for e in effects},
-             "truck_target_kg": truck_target_kg}
-    return SimResult(table, passes, truth, motion, ctx)
+    t_offset = 0.0
+    waves: dict[str, np.ndarray] | None = None
+    k = 0
+    segment = 0
+    last = (-45.0, 6.6, 0.0)
+    """Where the previous segment left the dipper (handle, crowd, swing)."""
+    while k < n_passes or segment == 0:
+        rng = np.random.default_rng(seed if segment == 0 else [seed, segment])
+        tl = Timeline(th=[last[0]], d=[last[1]], swing=[last[2]])
+        if segment == 0:
+            tl.go(3.0, "idle")
+        passes: list[PassTruth] = []
+        while k < n_passes:
+            if payloads is not None:
+                m = float(payloads[k])
+            elif truck_target_kg:
+                left = truck_target_kg - truck_load
+                m = float(np.clip(rng.normal(0.235, 0.025) * truck_target_kg, 3000.0,
+                                  min(RATED_PAYLOAD_KG, max(left * 1.08, 3000.0))))
+            else:
+                m = float(rng.uniform(*payload_range))
+            before = len(tl.phases)
+            dig_cycle(tl, rng, m, swing_to=float(rng.uniform(70, 110)))
+            ph: dict[str, tuple[float, float]] = {}
+            for t0, t1, name in tl.phases[before:]:
+                ph[name] = (t0, t1) if name not in ph else (ph[name][0], t1)
+            verified = bool(rng.uniform() < verified_fraction)
+            passes.append(PassTruth(k + 1, truck, m, ph, verified))
+            in_truck += 1
+            truck_load += m
+            k += 1
+            full = (truck_load >= 0.9 * truck_target_kg) if truck_target_kg else in_truck >= 4
+            if full and k < n_passes:
+                tl.go(rng.uniform(25.0, 40.0), "idle")
+                truck, in_truck, truck_load = truck + 1, 0, 0.0
+                if len(passes) >= chunk_passes:
+                    break
+            else:
+                tl.go(rng.uniform(0.5, 2.0), "idle")
+        table, motion, ctx = _finish(tl, rng, machine, effects, rate_hz, {}, t_offset, waves)
+        waves = ctx["waves"]
+        t = table.time
+        col = table.columns["payload_kg"]
+        for p in passes:
+            if p.verified:
+                col[(t >= p.phases["lift"][0] + t_offset)
+                    & (t < p.phases["dump"][0] + 0.3 + t_offset)] = p.payload_kg
+            info = payload_information(ctx, machine, p.phases["lift"][0] + 0.4,
+                                       p.phases["swing"][1])
+            p.crb_kg = 1.0 / math.sqrt(info) if info > 0 else math.inf
+            p.phases = {n: (a + t_offset, b + t_offset) for n, (a, b) in p.phases.items()}
+        truth = {"scenario": "cycles", "seed": seed, "params": machine.plant.as_dict(),
+                 "machine": machine.describe(),
+                 "effects": {e.name: e.magnitude for e in effects},
+                 "truck_target_kg": truck_target_kg}
+        yield SimResult(table, passes, truth, motion, ctx)
+        last = (tl.th[-1], tl.d[-1], tl.swing[-1])
+        # The next segment's first sample follows this one's last by one logger period.
+        t_offset = float(t[-1]) + 1.0 / rate_hz
+        segment += 1
 
 
 def simulate_calibration(load_kg: float, seed: int = 0, *, rate_hz: float = 50.0,
