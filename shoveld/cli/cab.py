@@ -44,10 +44,48 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="print one line per event even on a terminal")
     p.add_argument("--until-closed-trucks", type=int, default=None, metavar="N",
                    help="exit after N trucks were closed (demo, tests)")
+    add_tls_arg(p)
+    p.add_argument("--web", action="store_true",
+                   help="serve the cab page (a kiosk browser on the cab panel opens it) "
+                        "instead of drawing in the terminal")
+    p.add_argument("--listen", default="127.0.0.1:8080", metavar="HOST:PORT",
+                   help="address of the page with --web (default 127.0.0.1:8080)")
+    p.set_defaults(func=run)
+
+
+def add_tls_arg(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tls", nargs=3, metavar=("CA", "CERT", "KEY"), default=None,
                    help="mutual TLS with the site CA: its certificate, this display's "
                         "certificate and key (from 'shoveld pki issue NAME --role cab')")
-    p.set_defaults(func=run)
+
+
+def tls_from_args(args: argparse.Namespace) -> TlsConfig | None:
+    if not args.tls:
+        return None
+    from shoveld.daemon.config import TlsConfig
+
+    tls = TlsConfig(*(Path(x) for x in args.tls))
+    for x in tls.ca, tls.certificate, tls.key:
+        if not x.is_file():
+            raise CliError(f"--tls: {x}: no such file")
+    return tls
+
+
+def run_web(args: argparse.Namespace, page: str) -> int:
+    """``--web``: the page server with its Zenoh bridge (``shoveld.web``)."""
+    from shoveld.web.server import ZenohSource, parse_listen, run_screen
+
+    try:
+        host, port = parse_listen(args.listen)
+    except ValueError as e:
+        raise CliError(str(e)) from None
+    src = ZenohSource(args.connect or ["tcp/127.0.0.1:7447"], args.mode, args.shovel,
+                      args.prefix, tls_from_args(args))
+    try:
+        run_screen(src, host, port, page, args.duration)
+    except OSError as e:
+        raise CliError(f"--listen {args.listen}: {e.strerror or e}") from None
+    return 0
 
 
 TOPICS = frozenset({"payload/live", "pass", "truck", "health"})
@@ -216,7 +254,7 @@ class CabClient:
 
     def __init__(self, state: CabState, connect: list[str], mode: str = "client",
                  shovel: str = "*", prefix: str = "shovel",
-                 tls: TlsConfig | None = None) -> None:
+                 tls: TlsConfig | None = None, topics: frozenset[str] = TOPICS) -> None:
         import zenoh
 
         from shoveld.daemon.publisher import zenoh_config
@@ -231,7 +269,7 @@ class CabClient:
         def on_sample(sample: Any) -> None:
             key = str(sample.key_expr).split("/")
             topic = "/".join(key[n + 1:])
-            if topic not in TOPICS:
+            if topic not in topics:
                 return
             try:
                 msg = json.loads(sample.payload.to_bytes())
@@ -316,15 +354,10 @@ def show(state: CabState, out: TextIO, tty: bool, stop: threading.Event,
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.web:
+        return run_web(args, "")
     state = CabState()
-    tls = None
-    if args.tls:
-        from shoveld.daemon.config import TlsConfig
-
-        tls = TlsConfig(*(Path(x) for x in args.tls))
-        for x in tls.ca, tls.certificate, tls.key:
-            if not x.is_file():
-                raise CliError(f"--tls: {x}: no such file")
+    tls = tls_from_args(args)
     try:
         client = CabClient(state, args.connect or ["tcp/127.0.0.1:7447"], args.mode,
                            args.shovel, args.prefix, tls)

@@ -49,6 +49,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="keep the pass log here (default: a temporary directory)")
     p.add_argument("--lines", action="store_true",
                    help="print one line per event even on a terminal")
+    p.add_argument("--web", action="store_true",
+                   help="the cab page is the display: print events as lines here and keep "
+                        "the page up until Ctrl-C after the shift (the page is served in "
+                        "every demo; its address is printed)")
+    p.add_argument("--listen", default="127.0.0.1:8080", metavar="HOST:PORT",
+                   help="address of the cab page (default 127.0.0.1:8080; the next free "
+                        "port if taken)")
     p.set_defaults(func=run)
 
 
@@ -169,7 +176,11 @@ def run(args: argparse.Namespace) -> int:
             loop.start()
             state = CabState()
             cab = CabClient(state, [f"tcp/127.0.0.1:{args.port}"], "client", cfg.shovel_id)
+            page = page_client = None
             try:
+                page, page_client = _start_page(args, cfg.shovel_id)
+                if args.web:
+                    tty = False
                 cab.query_status()
                 watcher = threading.Event()
 
@@ -184,8 +195,19 @@ def run(args: argparse.Namespace) -> int:
                 except KeyboardInterrupt:
                     stop.set()
                     loop.join(timeout=5)
+                if args.web and page is not None:
+                    print(f"shift over; the cab page stays up at {page.url} until Ctrl-C",
+                          flush=True)
+                    try:
+                        threading.Event().wait()
+                    except KeyboardInterrupt:
+                        pass
             finally:
                 cab.close()
+                if page_client is not None:
+                    page_client.close()
+                if page is not None:
+                    page.close()
                 stop.set()
                 loop.join(timeout=5)
                 service.close()
@@ -193,6 +215,30 @@ def run(args: argparse.Namespace) -> int:
     finally:
         tmp.cleanup()
     return 0
+
+
+def _start_page(args: argparse.Namespace, shovel: str) -> tuple[Any, Any]:
+    """The cab page beside the terminal view (``shoveld.web``); its address is printed.
+    A taken port moves on to a free one: the demo must not fail for a second copy."""
+    from shoveld.cli.cab import TOPICS, CabClient
+    from shoveld.web.server import ThreadedScreen, parse_listen
+    from shoveld.web.state import ScreenState
+
+    try:
+        host, port = parse_listen(args.listen)
+    except ValueError as e:
+        raise CliError(str(e)) from None
+    state = ScreenState()
+    client = CabClient(state, [f"tcp/127.0.0.1:{args.port}"], "client", shovel,
+                       topics=TOPICS | {"joints"})
+    state.set_link("up", f"tcp/127.0.0.1:{args.port}")
+    try:
+        page = ThreadedScreen(state, host, port)
+    except OSError:
+        page = ThreadedScreen(state, host, 0)
+    client.query_status()
+    print(f"cab page: {page.url}  (open it in a browser)", flush=True)
+    return page, client
 
 
 def _summary(state: Any, service: Any, out: Any) -> None:

@@ -1,0 +1,1 @@
+"""The cab and office screens as web pages (``shoveld cab --web``, ``shoveld office --web``)."""

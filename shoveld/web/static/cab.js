@@ -1,0 +1,76 @@
+// The cab page: draws one shovel's snapshot (see shoveld/web/state.py for its fields).
+"use strict";
+const $ = id => document.getElementById(id);
+const wanted = new URLSearchParams(location.search).get("shovel");
+
+function pick(snap) {
+  if (!snap || !snap.shovels.length) return null;
+  return snap.shovels.find(s => s.shovel === wanted) || snap.shovels[0];
+}
+
+function drawArm(j) {
+  if (!j || j.handle_deg == null || j.crowd_m == null) { $("joints").textContent = "arm: no data"; return; }
+  const rad = Math.PI / 180, boom = (j.boom_deg ?? 45) * rad, th = j.handle_deg * rad;
+  // Boom foot at the origin, point sheave 15 m up the boom, shipper shaft 7 m up (SVG y points down).
+  const sx = 15 * Math.cos(boom), sy = -15 * Math.sin(boom);
+  const px = 7 * Math.cos(boom), py = -7 * Math.sin(boom);
+  const dx = px + j.crowd_m * Math.cos(th), dy = py - j.crowd_m * Math.sin(th);
+  const set = (id, a) => { for (const k in a) $(id).setAttribute(k, a[k]); };
+  set("boom", {x1: 0, y1: 0, x2: sx, y2: sy});
+  set("handle", {x1: px, y1: py, x2: dx, y2: dy});
+  set("rope", {x1: sx, y1: sy, x2: dx, y2: dy});
+  set("dipper", {cx: dx, cy: dy});
+  $("joints").textContent = `handle ${j.handle_deg.toFixed(0)}°  crowd ${j.crowd_m.toFixed(1)} m  swing ${(j.swing_deg ?? 0).toFixed(0)}°`;
+}
+
+function render(snap) {
+  const s = pick(snap);
+  const probs = screen.problems(snap, s);
+  $("health").textContent = probs.length ? probs.join(" · ") : "all sensors ok";
+  $("health").className = probs.length ? "bad" : "ok";
+  $("link").textContent = screen.socketUp && snap && snap.link === "up" ? "link up" : "link down";
+  if (!s) return;
+  $("shovel").textContent = s.shovel;
+  const p = $("payload");
+  if (s.valid && screen.socketUp) {
+    p.textContent = (s.payload_kg / 1000).toFixed(1) + " t";
+    p.className = "";
+    $("payload-std").textContent = "± " + (s.std_kg / 1000).toFixed(1) + " t";
+  } else {
+    p.textContent = "no valid estimate";
+    p.className = "invalid";
+    $("payload-std").textContent = "";
+  }
+  $("phase").textContent = s.phase ? s.phase.toUpperCase() : "";
+  const tr = s.truck || {};
+  $("truck-no").textContent = tr.truck ?? "-";
+  $("truck-passes").textContent = tr.passes ?? 0;
+  $("truck-total").textContent = screen.t(tr.total_kg);
+  $("truck-target").textContent = screen.t(tr.target_kg, 0);
+  $("remaining").textContent = s.remaining_kg == null ? "-" :
+    (s.remaining_kg > 0 ? screen.t(s.remaining_kg) : "0 t (over by " + screen.t(-s.remaining_kg) + ")");
+  const fill = tr.target_kg ? tr.total_kg / tr.target_kg : 0;
+  const bar = $("gauge-fill");
+  bar.style.width = Math.min(100, fill / 1.3 * 100).toFixed(1) + "%";
+  bar.className = "fill" + (fill > 1.2 ? " alarm" : fill > 1.1 ? " warn" : "");
+  $("hint").textContent = s.hint ? s.hint.text : "";
+  const w = $("warning");
+  w.textContent = s.warning ? s.warning.text : "";
+  w.className = s.warning ? s.warning.level : "";
+  $("passes").innerHTML = s.passes.map((q, i) => {
+    if (!(q.pass in screen.shown)) screen.shown[q.pass] = Date.now();
+    return q.valid
+      ? `<tr><td>${i + 1}</td><td>${(q.payload_kg / 1000).toFixed(1)}</td><td>${(q.std_kg / 1000).toFixed(1)}</td></tr>`
+      : `<tr class="invalid-pass"><td>${i + 1}</td><td colspan="2">not weighed: ${screen.esc(q.reason)}</td></tr>`;
+  }).join("");
+  $("trucks").innerHTML = s.closed.map(c =>
+    `<tr><td>${c.truck}</td><td>${c.passes}</td><td>${(c.total_kg / 1000).toFixed(1)}</td><td>${c.fill_pct} %</td><td>${screen.esc(c.status)}</td></tr>`).join("");
+  const r = s.rule;
+  $("shift").textContent = r ? `${r.trucks} trucks, mean ${r.mean_pct} % of target, ${r.over_110_pct} % over 110 %, ${r.over_120} over 120 % — ` +
+    (r.compliant ? "within the 10/10/20 rule" : "OUTSIDE the 10/10/20 rule") : "no truck closed yet";
+  drawArm(s.joints);
+}
+
+screen.theme();
+screen.connect(render);
+setInterval(() => render(screen.snapshot), 1000);

@@ -1,0 +1,29 @@
+// The mine office page: one card per shovel on the Zenoh network.
+"use strict";
+function card(s) {
+  const tr = s.truck || {};
+  const state = s.silent ? `<span class="silent-tag">SILENT${s.age_s != null ? " for " + s.age_s.toFixed(0) + " s" : ""}</span>`
+    : `<span class="state">${screen.esc((s.phase || "idle").toUpperCase())}</span>`;
+  const live = s.valid ? screen.t(s.payload_kg) + " ± " + screen.t(s.std_kg) : "no valid estimate";
+  return `<section class="panel card${s.silent ? " silent" : ""}" data-shovel="${screen.esc(s.shovel)}">
+    <h2>${screen.esc(s.shovel)} ${state}</h2>
+    <div>live payload: <b class="live">${live}</b></div>
+    <div>truck ${tr.truck ?? "-"}: <b class="truck">${screen.t(tr.total_kg)}</b> of ${screen.t(tr.target_kg, 0)}, ${tr.passes ?? 0} passes</div>
+    <div>this shift: <b class="shift">${s.shift.passes} passes, ${screen.t(s.shift.kg)}</b> in ${s.shift.trucks} trucks</div>
+    <div class="problems">${s.problems.map(screen.esc).join("<br>")}</div>
+  </section>`;
+}
+function render(snap) {
+  const probs = screen.problems(snap, null);
+  const h = document.getElementById("health");
+  h.textContent = probs.length ? probs.join(" · ") : "link ok";
+  h.className = probs.length ? "bad" : "ok";
+  if (!snap) return;
+  document.getElementById("cards").innerHTML = snap.shovels.map(card).join("");
+  const silent = snap.shovels.filter(s => s.silent).length;
+  document.getElementById("summary").textContent = `${snap.shovels.length} shovels, ${silent} silent`;
+  document.getElementById("link").textContent = snap.link === "up" ? "link up" : "link down";
+}
+screen.theme();
+screen.connect(render);
+setInterval(() => render(screen.snapshot), 1000);
