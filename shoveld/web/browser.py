@@ -39,4 +39,9 @@ def open_browser(width: int = 1280, height: int = 800) -> Any:
                  "--disable-component-update", "--disable-sync", "--disable-dev-shm-usage",
                  f"--window-size={width},{height}", f"--user-data-dir={profile}"):
         opts.add_argument(flag)
-    return webdriver.Chrome(service=Service(CHROMEDRIVER), options=opts)
+    driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=opts)
+    # The page area itself at the panel's size (the window size counts the browser's frame).
+    driver.execute_cdp_cmd("Emulation.setDeviceMetricsOverride",
+                           {"width": width, "height": height, "deviceScaleFactor": 1,
+                            "mobile": False})
+    return driver

@@ -48,7 +48,7 @@ function render(snap) {
   $("truck-total").textContent = screen.t(tr.total_kg);
   $("truck-target").textContent = screen.t(tr.target_kg, 0);
   $("remaining").textContent = s.remaining_kg == null ? "-" :
-    (s.remaining_kg > 0 ? screen.t(s.remaining_kg) : "0 t (over by " + screen.t(-s.remaining_kg) + ")");
+    (s.remaining_kg > 0 ? screen.t(s.remaining_kg) : "over by " + screen.t(-s.remaining_kg));
   const fill = tr.target_kg ? tr.total_kg / tr.target_kg : 0;
   const bar = $("gauge-fill");
   bar.style.width = Math.min(100, fill / 1.3 * 100).toFixed(1) + "%";

@@ -1,0 +1,115 @@
+"""Screenshots of the cab and office pages in their main states, for docs/screens/.
+
+The pages are fed a fixed sequence of the daemon's messages (so the pictures are the
+same every time) and shot in headless Chromium at the cab panel's 1280 x 800.
+
+    .venv/bin/python scripts/screenshots.py [--out docs/screens]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+from typing import Any
+
+from shoveld.web.browser import open_browser
+from shoveld.web.server import ThreadedScreen
+from shoveld.web.state import ScreenState
+
+TARGET = 136000.0
+RULE = {"window_h": 12.0, "trucks": 7, "mean_kg": 131800.0, "target_kg": TARGET,
+        "mean_pct": 96.9, "over_110_pct": 0.0, "over_120": 0, "compliant": True}
+JOINTS = {"handle_deg": 18.0, "crowd_m": 9.1, "boom_deg": 45.0, "swing_deg": 82.0,
+          "invalid": []}
+
+
+def truck(n: int, passes: list[float], closed: bool = False) -> dict[str, Any]:
+    total = sum(passes)
+    fill = round(100 * total / TARGET, 1)
+    status = ("over_120" if fill > 120 else "over_110" if fill > 110 else
+              "ok" if fill >= 90 else "under")
+    return {"truck": n, "passes": len(passes), "total_kg": total, "std_kg": 350.0,
+            "target_kg": TARGET, "fill_pct": fill, "status": status, "closed": closed,
+            "rule_10_10_20": RULE}
+
+
+def feed(st: ScreenState, shovel: str, done: list[list[float]], current: list[float],
+         live: float | None, phase: str, problems: list[str]) -> None:
+    st.on_alive(shovel, True)
+    n = 0
+    for k, t in enumerate(done, start=1):
+        for p in t:
+            n += 1
+            st.on_message(shovel, "pass", {"pass": n, "truck": k, "payload_kg": p,
+                                           "std_kg": 300.0, "valid": True})
+        st.on_message(shovel, "truck", truck(k, t, closed=True))
+    k = len(done) + 1
+    st.on_message(shovel, "truck", truck(k, []))
+    for p in current:
+        n += 1
+        st.on_message(shovel, "pass", {"pass": n, "truck": k, "payload_kg": p,
+                                       "std_kg": 300.0, "valid": True})
+        st.on_message(shovel, "truck", truck(k, current[:current.index(p) + 1]))
+    st.on_message(shovel, "joints", JOINTS)
+    st.on_message(shovel, "payload/live", {"payload_kg": live, "std_kg": 310.0,
+                                           "valid": live is not None, "phase": phase})
+    st.on_message(shovel, "health", {"problems": problems, "ok": not problems})
+
+
+def shoot(name: str, st: ScreenState, out: Path, path: str = "", night: bool = False) -> None:
+    page = ThreadedScreen(st)
+    b = open_browser()
+    try:
+        b.get(page.url + path)
+        if night:
+            b.execute_script("localStorage.setItem('shoveld-theme', 'night')")
+            b.refresh()
+        time.sleep(1.0)
+        # The pictures show a shovel that is talking (but the one the office shows silent).
+        now = time.monotonic()
+        for name_, t in st.heard.items():
+            if now - t < 5.0:
+                st.heard[name_] = now
+        st.set_link(st.link, st.link_detail)
+        time.sleep(0.5)
+        b.save_screenshot(str(out / f"{name}.png"))
+    finally:
+        b.quit()
+        page.close()
+    print(f"wrote {out / name}.png")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--out", default="docs/screens")
+    args = ap.parse_args()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    done = [[33100.0, 34200.0, 31800.0, 33500.0], [32900.0, 34800.0, 33300.0, 32000.0]]
+    st = ScreenState()
+    st.set_link("up", "tcp/127.0.0.1:7447")
+    feed(st, "ph4100-07", done, [33400.0, 32700.0, 34100.0], 26800.0, "swing", [])
+    shoot("cab-loading", st, out)
+    shoot("cab-night", st, out, night=True)
+    st = ScreenState()
+    st.set_link("up", "tcp/127.0.0.1:7447")
+    feed(st, "ph4100-07", done, [33400.0, 34700.0, 34100.0, 34900.0, 20100.0], None, "return",
+         [])
+    shoot("cab-overload", st, out)
+    st = ScreenState()
+    st.set_link("up", "tcp/127.0.0.1:7447")
+    feed(st, "ph4100-07", done, [33400.0], None, "lift",
+         ["laser: no reading for 3.0 s", "loop: 14 overruns in the last 100 ticks"])
+    shoot("cab-sensor-missing", st, out)
+    st = ScreenState()
+    st.set_link("up", "tcp/10.20.0.5:7447 (site router)")
+    feed(st, "ph4100-07", done, [33400.0, 32700.0], 30100.0, "lift", [])
+    feed(st, "ph4100-09", done[:1], [29800.0], None, "dig", [])
+    feed(st, "wa1200-02", [], [21000.0, 22500.0], None, "return", ["mti: disconnected"])
+    st.heard["wa1200-02"] -= 12.0  # went quiet 12 s ago
+    shoot("office", st, out, "office")
+
+
+if __name__ == "__main__":
+    main()
