@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import sys
 import threading
 import time
@@ -91,6 +92,16 @@ def run_web(args: argparse.Namespace, page: str) -> int:
 TOPICS = frozenset({"payload/live", "pass", "truck", "health"})
 
 
+def _n(k: Any, one: str, many: str) -> str:
+    return f"{k} {one if k == 1 else many}"
+
+
+def _truck_word(t: dict[str, Any]) -> str:
+    """A truck's status as an operator should read it: "under" only once it is sent off."""
+    status = str(t.get("status") or "")
+    return status if t.get("closed") or status.startswith("over") else "loading"
+
+
 def _kg(x: Any) -> str:
     return "     --" if x is None else f"{x:7.0f}"
 
@@ -159,9 +170,10 @@ class CabState:
                     v.truck = msg
                 self.lines.append(
                     f"{time.strftime('%H:%M:%S')} {shovel} truck {msg.get('truck')}"
-                    f"{' CLOSED' if msg.get('closed') else ''}: {msg.get('passes')} passes, "
+                    f"{' CLOSED' if msg.get('closed') else ''}: "
+                    f"{_n(msg.get('passes'), 'pass', 'passes')}, "
                     f"{msg.get('total_kg', 0):.0f} of {msg.get('target_kg', 0):.0f} kg "
-                    f"({msg.get('fill_pct')} %) {msg.get('status')}")
+                    f"({msg.get('fill_pct')} %) {_truck_word(msg)}")
             elif topic == "health":
                 probs = list(msg.get("problems") or [])
                 if probs != v.problems:
@@ -192,7 +204,7 @@ class CabState:
             v.problems = list(st.get("problems") or [])
             self.lines.append(f"{time.strftime('%H:%M:%S')} {shovel} status: truck "
                               f"{(st.get('truck') or {}).get('truck')}, "
-                              f"{len(v.passes)} passes so far")
+                              f"{_n(len(v.passes), 'pass', 'passes')} so far")
 
     def on_alive(self, shovel: str, alive: bool) -> None:
         with self.lock:
@@ -206,7 +218,10 @@ class CabState:
         return out
 
     def screen(self, width: int = 72) -> str:
-        """The whole cab screen as text."""
+        """The whole cab screen as text, ``width`` columns wide (the terminal's)."""
+        from shoveld.web.state import last_pass_hint, truck_warning
+
+        width = max(40, width)
         out: list[str] = []
         with self.lock:
             if not self.shovels:
@@ -214,35 +229,61 @@ class CabState:
             for name in sorted(self.shovels):
                 v = self.shovels[name]
                 out.append(f"== {name} " + ("" if v.alive else "(daemon not seen) ")
-                           + "=" * max(0, width - len(name) - 4))
+                           + "=" * max(0, width - len(name) - 4 - (0 if v.alive else 18)))
                 lv = v.live or {}
                 if lv.get("valid") and lv.get("payload_kg") is not None:
                     val = f"{lv['payload_kg']:8.0f} kg  +- {lv['std_kg']:.0f} kg"
                 else:
                     val = "      -- (no valid estimate)"
                 out.append(f"  phase {lv.get('phase', '?'):7s}  live payload {val}")
-                t = v.truck or {}
-                out.append(f"  truck {t.get('truck', '?')}: {t.get('passes', 0)} passes, "
-                           f"{t.get('total_kg', 0):.0f} of {t.get('target_kg', 0):.0f} kg "
-                           f"({t.get('fill_pct', 0)} %)  {str(t.get('status', '')).upper()}")
-                target = t.get("target_kg") or 1.0
-                fill = min(1.3, (t.get("total_kg") or 0.0) / target)
+                t = dict(v.truck or {})
+                if v.closed and t and v.closed[-1].get("truck") == t.get("truck"):
+                    t = dict(v.closed[-1])
+                target = float(t.get("target_kg") or 0.0)
+                total = float(t.get("total_kg") or 0.0)
+                n = int(t.get("passes") or 0)
+                status = str(t.get("status") or "")
+                # A truck being loaded is not "under" yet: say so only once it is sent off.
+                word = ("sent off, " + status.upper() if t.get("closed") else
+                        "OVER" if status.startswith("over") else "loading")
+                out.append(f"  truck {t.get('truck', '?')}: {n} pass{'' if n == 1 else 'es'}, "
+                           f"{total:.0f} of {target:.0f} kg ({t.get('fill_pct', 0)} %)  {word}")
+                if target and not t.get("closed"):
+                    recent = [float(p["payload_kg"]) for p in v.passes[-10:]
+                              if p.get("valid") and p.get("payload_kg") is not None]
+                    left = target - total
+                    out.append(f"  still to go {max(left, 0.0):.0f} kg" if left > 0 else
+                               f"  over target by {-left:.0f} kg")
+                    out.append("  " + last_pass_hint(total, target, recent)["text"])
+                warn = truck_warning(t)
+                if warn:
+                    out.append(f"  !! {warn['text']}")
+                fill = min(1.3, total / (target or 1.0))
                 bar_w = width - 12
-                n = int(bar_w * fill / 1.3)
-                mark = int(bar_w / 1.3)
-                bar = "".join("#" if i < n else ("|" if i == mark else ".")
+                k = int(bar_w * fill / 1.3)
+                marks = {int(bar_w * f / 1.3) for f in (1.0, 1.1, 1.2)}
+                bar = "".join("#" if i < k else ("|" if i in marks else ".")
                               for i in range(bar_w))
                 out.append(f"  [{bar}]")
-                for p in v.passes[-8:]:
+                mine = [p for p in v.passes if p.get("truck") == t.get("truck")]
+                for i, p in enumerate(mine, start=1):
+                    if i <= len(mine) - 8:
+                        continue
                     if p.get("valid"):
-                        out.append(f"    pass {p['pass']:4d}  {_kg(p.get('payload_kg'))} kg"
+                        out.append(f"    pass {i:2d}  {_kg(p.get('payload_kg'))} kg"
                                    f"  +- {p.get('std_kg') or 0:5.0f} kg")
                     else:
-                        out.append(f"    pass {p['pass']:4d}  INVALID  {p.get('reason', '')}")
+                        out.append(f"    pass {i:2d}  INVALID  {p.get('reason', '')}")
                 if v.closed:
                     c = v.closed[-1]
                     out.append(f"  last truck {c['truck']}: {c['total_kg']:.0f} kg "
                                f"({c['fill_pct']} %) {c['status']}")
+                    r = c.get("rule_10_10_20") or {}
+                    if r.get("trucks"):
+                        out.append(f"  shift: {r['trucks']} trucks, mean fill {r['mean_pct']} %, "
+                                   f"{r['over_110_pct']} % over 110 %, {r['over_120']} over "
+                                   f"120 % ({'no overload beyond' if r['compliant'] else 'OUTSIDE'}"
+                                   " the 10/10/20 rule)")
                 if v.problems:
                     out.append("  ! " + "; ".join(v.problems)[: width * 2])
                 out.append("")
@@ -333,7 +374,11 @@ def show(state: CabState, out: TextIO, tty: bool, stop: threading.Event,
         while not stop.is_set():
             if tty:
                 state.take_lines()
-                out.write("\x1b[H\x1b[2J" + state.screen())
+                # Home the cursor and overwrite line by line, clearing each line's rest and
+                # what is below: the screen never blanks, so it does not flicker.
+                cols = shutil.get_terminal_size((80, 24)).columns
+                text = state.screen(cols - 1)
+                out.write("\x1b[H" + text.replace("\n", "\x1b[K\n") + "\x1b[J")
             else:
                 for line in state.take_lines():
                     out.write(line + "\n")
@@ -353,17 +398,40 @@ def show(state: CabState, out: TextIO, tty: bool, stop: threading.Event,
             out.flush()
 
 
+def connect_waiting(state: CabState, args: argparse.Namespace, tls: TlsConfig | None,
+                    retry_s: float = 2.0) -> CabClient | None:
+    """Open the Zenoh session, waiting for the daemon or the router to come up: a cab
+    switched on before them says what it waits for and keeps trying (None: --duration
+    ran out first, or Ctrl-C)."""
+    where = ", ".join(args.connect or ["tcp/127.0.0.1:7447"])
+    end = None if args.duration is None else time.monotonic() + args.duration
+    said = False
+    while True:
+        try:
+            return CabClient(state, args.connect or ["tcp/127.0.0.1:7447"], args.mode,
+                             args.shovel, args.prefix, tls)
+        except Exception:  # noqa: BLE001 - zenoh.ZError: nothing answers there yet
+            if not said:
+                print(f"waiting for Zenoh at {where} (the shovel's daemon or the site router "
+                      f"is not answering yet); trying every {retry_s:g} s, Ctrl-C to stop",
+                      file=sys.stderr, flush=True)
+                said = True
+        if end is not None and time.monotonic() >= end:
+            return None
+        try:
+            time.sleep(retry_s)
+        except KeyboardInterrupt:
+            return None
+
+
 def run(args: argparse.Namespace) -> int:
     if args.web:
         return run_web(args, "")
     state = CabState()
     tls = tls_from_args(args)
-    try:
-        client = CabClient(state, args.connect or ["tcp/127.0.0.1:7447"], args.mode,
-                           args.shovel, args.prefix, tls)
-    except Exception as e:  # noqa: BLE001 - zenoh.ZError
-        raise CliError(f"cannot connect to Zenoh at {args.connect or 'tcp/127.0.0.1:7447'}: "
-                       f"{e}") from None
+    client = connect_waiting(state, args, tls)
+    if client is None:
+        return 0
     stop = threading.Event()
     try:
         show(state, sys.stdout, sys.stdout.isatty() and not args.lines, stop, args.duration,

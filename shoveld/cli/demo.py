@@ -247,7 +247,9 @@ def _summary(state: Any, service: Any, out: Any) -> None:
     lines = ["", "demo finished."]
     for v in state.shovels.values():
         for c in v.closed:
-            lines.append(f"  truck {c['truck']}: {c['passes']} passes, {c['total_kg']:.0f} kg "
+            n = c["passes"]
+            lines.append(f"  truck {c['truck']}: {n} pass{'' if n == 1 else 'es'}, "
+                         f"{c['total_kg']:.0f} kg "
                          f"of {c['target_kg']:.0f} kg ({c['fill_pct']} %), {c['status']}")
     st = service.loop_stats.as_dict(service.cfg.loop.rate_hz)
     j = st.get("jitter_ms") or {}

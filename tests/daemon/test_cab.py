@@ -40,12 +40,35 @@ def test_screen_shows_live_passes_truck_and_problems() -> None:
     screen = state.screen()
     assert "== s7" in screen
     assert "phase swing" in screen and "31234 kg" in screen
-    assert "truck 4: 2 passes, 30000 of 136000 kg (22.1 %)  UNDER" in screen
-    assert "pass   11    30000 kg" in screen and "pass   12  INVALID" in screen
+    # a truck being loaded is "loading", not UNDER; what is still to go and a hint
+    assert "truck 4: 2 passes, 30000 of 136000 kg (22.1 %)  loading" in screen
+    assert "UNDER" not in screen
+    assert "still to go 106000 kg" in screen and "passes left" in screen
+    # passes numbered within the truck, not over the shift
+    assert "pass  1    30000 kg" in screen and "pass  2  INVALID" in screen
     assert "! laser: babbling" in screen
     state.on_message("s7", "payload/live", {"time": T, "payload_kg": None, "std_kg": None,
                                             "phase": "dump", "valid": False})
     assert "no valid estimate" in state.screen()
+
+
+def test_screen_warns_of_overload_and_words_the_shift_honestly() -> None:
+    state = CabState()
+    fill(state)
+    state.on_message("s7", "truck", {"truck": 4, "passes": 5, "total_kg": 151000.0,
+                                     "target_kg": 136000.0, "fill_pct": 111.0,
+                                     "status": "over_110"})
+    screen = state.screen()
+    assert "!! Over 110 %" in screen and "over target by 15000 kg" in screen
+    rule = {"trucks": 6, "mean_pct": 34.0, "over_110_pct": 0.0, "over_120": 0,
+            "compliant": True}
+    state.on_message("s7", "truck", {"truck": 4, "passes": 1, "total_kg": 46000.0,
+                                     "target_kg": 136000.0, "fill_pct": 33.8, "status": "under",
+                                     "closed": True, "rule_10_10_20": rule})
+    screen = state.screen()
+    assert "sent off, UNDER" in screen and "Left under-loaded" in screen
+    assert "mean fill 34.0 %" in screen and "compliant" not in screen
+    assert "truck 4: 1 pass," in screen  # not "1 passes"
 
 
 def test_line_mode_and_tty_mode() -> None:
@@ -55,14 +78,25 @@ def test_line_mode_and_tty_mode() -> None:
     stop = threading.Event()
     show(state, out, tty=False, stop=stop, duration=0.0)
     text = out.getvalue()
-    assert "s7 status: truck 4, 1 passes so far" in text
+    assert "s7 status: truck 4, 1 pass so far" in text
     assert "s7 swing   live 31234 kg +- 400 kg" in text
     assert "s7 pass 12 truck 4: INVALID (only 3 valid samples)" in text
     assert "s7 health: laser: babbling" in text
     out = io.StringIO()
     show(state, out, tty=True, stop=stop, duration=0.0)
-    assert out.getvalue().startswith("\x1b[?25l\x1b[H\x1b[2J== s7")
-    assert out.getvalue().endswith("\x1b[?25h")
+    # redrawn in place: cursor home, each line cleared to its end, never the whole screen
+    assert out.getvalue().startswith("\x1b[?25l\x1b[H== s7")
+    assert "\x1b[2J" not in out.getvalue() and "\x1b[K\n" in out.getvalue()
+    assert out.getvalue().endswith("\x1b[J\x1b[?25h")
+
+
+def test_cab_started_before_the_daemon_says_what_it_waits_for() -> None:
+    r = subprocess.run([sys.executable, "-m", "shoveld", "cab", "--connect",
+                        f"tcp/127.0.0.1:{free_port()}", "--duration", "3"],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert "waiting for Zenoh at tcp/127.0.0.1:" in r.stderr
+    assert ".rs" not in r.stderr and "Traceback" not in r.stderr
 
 
 def test_cab_cli_on_zenoh(tmp_path: Path, e2e_table: SignalsTable, params: ModelParams) -> None:
@@ -84,7 +118,7 @@ def test_cab_cli_on_zenoh(tmp_path: Path, e2e_table: SignalsTable, params: Model
     assert cab.returncode == 0, err
     assert "t1 status: truck 1, 0 passes so far" in out
     assert "t1 pass 1 truck 1:" in out and "t1 pass 3 truck 2:" in out
-    assert "t1 truck 1 CLOSED: 2 passes" in out and "t1 truck 2 CLOSED: 1 passes" in out
+    assert "t1 truck 1 CLOSED: 2 passes" in out and "t1 truck 2 CLOSED: 1 pass," in out
     assert " lift " in out and " swing " in out  # live payload lines at phase changes
 
 

@@ -18,8 +18,9 @@ def test_demo_runs_out_of_the_box_and_ends_by_itself() -> None:
     assert "calibrating the simulated shovel" in out
     assert f"Zenoh on tcp/127.0.0.1:{port}" in out
     assert "demo pass 1 truck 1:" in out and " kg +- " in out
-    assert "demo truck 1 CLOSED: 1 passes" in out
-    assert "demo finished." in out and "truck 1: 1 passes" in out
+    assert "demo truck 1 CLOSED: 1 pass," in out
+    assert "demo finished." in out and "truck 1: 1 pass," in out
+    assert "cab page: http://127.0.0.1:" in out
 
 
 def test_demo_refuses_a_busy_port() -> None:
