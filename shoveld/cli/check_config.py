@@ -8,7 +8,7 @@ from shoveld.cli import CliError
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from shoveld.paths import DEFAULT_CONFIG
+    from shoveld.paths import CONFIG_SEARCH
 
     p = sub.add_parser(
         "check-config", help="validate the service configuration",
@@ -18,7 +18,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "certificates and key are readable and in date and every endpoint is "
                     "tls/. Prints a summary, or the first "
                     "problem naming the key, and exits 2.")
-    p.add_argument("config", nargs="?", default=DEFAULT_CONFIG, metavar="FILE")
+    p.add_argument("config", nargs="?", default=None, metavar="FILE",
+                   help=f"the configuration (default: {CONFIG_SEARCH})")
     p.add_argument("--no-params", action="store_true",
                    help="do not load the parameters file (checking on another machine)")
     p.set_defaults(func=run)
@@ -33,6 +34,9 @@ def run(args: argparse.Namespace) -> int:
     )
 
     try:
+        from shoveld.paths import find_config
+
+        args.config = args.config or find_config()
         cfg = load_config(args.config)
         tls_notes = check_tls_files(cfg)
         params = None if args.no_params else check_params(cfg)

@@ -19,7 +19,7 @@ from shoveld.cli import CliError
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from shoveld.paths import DEFAULT_CONFIG
+    from shoveld.paths import CONFIG_SEARCH
 
     p = sub.add_parser(
         "passes", help="export the pass log (shift report)",
@@ -28,22 +28,31 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "spreadsheet.")
     src = p.add_mutually_exclusive_group()
     src.add_argument("--config", default=None,
-                     help=f"daemon config whose shovel.state_dir to read (default "
-                          f"{DEFAULT_CONFIG})")
+                     help=f"daemon config whose shovel.state_dir to read (default: "
+                          f"{CONFIG_SEARCH})")
     src.add_argument("--state-dir", default=None, help="the daemon's state directory")
     src.add_argument("--db", default=None, help="the pass log file itself")
     p.add_argument("--since", default=None, metavar="WHEN",
-                   help="passes that ended at or after WHEN (ISO time, Unix s, or 12h / 30m / "
-                        "2d back from now)")
+                   help="passes that ended at or after WHEN: an ISO date or time, Unix "
+                        "seconds, 12h / 30m / 2d back from now, today or yesterday")
     p.add_argument("--until", default=None, metavar="WHEN", help="... and before WHEN")
     p.add_argument("--csv", action="store_true", help="CSV on stdout")
     p.set_defaults(func=run)
 
 
 def parse_when(text: str, now: float | None = None) -> float:
-    """ISO 8601 (local time if naive), Unix seconds, or ``<n>[smhd]`` before now."""
+    """ISO 8601 (local time if naive), Unix seconds, ``<n>[smhd]`` before now, or
+    ``today`` / ``yesterday`` (local midnight)."""
     now = time.time() if now is None else now
     s = text.strip()
+    if s.lower() in ("today", "yesterday", "now"):
+        if s.lower() == "now":
+            return now
+        midnight = dt.datetime.fromtimestamp(now).astimezone().replace(
+            hour=0, minute=0, second=0, microsecond=0)
+        if s.lower() == "yesterday":
+            midnight -= dt.timedelta(days=1)
+        return midnight.timestamp()
     m = re.fullmatch(r"(\d+(?:\.\d+)?)\s*([smhd])", s)
     if m:
         mult = {"s": 1, "m": 60, "h": 3600, "d": 86400}[m.group(2)]
@@ -53,8 +62,8 @@ def parse_when(text: str, now: float | None = None) -> float:
     try:
         d = dt.datetime.fromisoformat(s)
     except ValueError:
-        raise CliError(f"cannot read time {text!r}: use e.g. 2026-11-21T18:00, 12h, or Unix "
-                       "seconds") from None
+        raise CliError(f"cannot read time {text!r}: use e.g. 2026-11-21T18:00, 2026-11-21, "
+                       "12h, yesterday, or Unix seconds") from None
     if d.tzinfo is None:
         d = d.astimezone()  # naive = local time
     return d.timestamp()
@@ -67,15 +76,16 @@ def iso(t: float | None) -> str:
 
 
 def _db(args: argparse.Namespace) -> Path:
-    from shoveld.daemon.config import DEFAULT_CONFIG, ConfigError, load_config
+    from shoveld.daemon.config import ConfigError, load_config
     from shoveld.daemon.persist import db_path
+    from shoveld.paths import find_config
 
     if args.db:
         return Path(args.db)
     if args.state_dir:
         return db_path(args.state_dir)
     try:
-        cfg = load_config(args.config or DEFAULT_CONFIG, check_drivers=False)
+        cfg = load_config(args.config or find_config(), check_drivers=False)
     except ConfigError as e:
         raise CliError(f"{e} (or give --state-dir / --db)") from None
     return db_path(cfg.state_dir)

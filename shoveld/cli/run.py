@@ -13,15 +13,14 @@ log = logging.getLogger("shoveld.run")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from shoveld.paths import DEFAULT_CONFIG
+    from shoveld.paths import CONFIG_SEARCH
 
     p = sub.add_parser(
         "run", help="run the payload monitor service",
         description="Starts one thread per configured device, the fixed-rate loop (engine, "
                     "payload, trucks), the pass log and Zenoh publishing. Stops cleanly on "
                     "SIGTERM/SIGINT; under systemd it sends READY and watchdog pings.")
-    p.add_argument("--config", default=DEFAULT_CONFIG, help=f"TOML file (default "
-                   f"{DEFAULT_CONFIG})")
+    p.add_argument("--config", default=None, help=f"TOML file (default: {CONFIG_SEARCH})")
     p.add_argument("--state-dir", default=None,
                    help="override shovel.state_dir (where the pass log lives)")
     p.add_argument("--duration", type=float, default=None,
@@ -53,6 +52,9 @@ def run(args: argparse.Namespace) -> int:
     from shoveld.daemon.service import Service
 
     try:
+        from shoveld.paths import find_config
+
+        args.config = args.config or find_config()
         cfg = load_config(args.config)
         if args.state_dir:
             cfg = dataclasses.replace(cfg, state_dir=Path(args.state_dir))

@@ -104,6 +104,26 @@ def test_parse_when() -> None:
     assert parse_when("2026-11-21T18:00:00+00:00", now) == 1795284000.0
     with pytest.raises(Exception, match="cannot read time"):
         parse_when("yesterday-ish", now)
+    # today / yesterday: local midnight, a day apart, the first not after now
+    today, yesterday = parse_when("today", now), parse_when("yesterday", now)
+    assert 0 <= now - today < 86400 and 82800 <= today - yesterday <= 90000
+    assert parse_when("2026-11-21", now) == parse_when("2026-11-21T00:00", now)
+
+
+def test_commands_find_a_local_config_before_the_installed_one(tmp_path: Path, monkeypatch,
+                                                              capsys) -> None:
+    from shoveld.cli import main
+    from shoveld.paths import DEFAULT_CONFIG, find_config
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("SHOVELD_CONFIG", raising=False)
+    assert find_config() == DEFAULT_CONFIG
+    (tmp_path / "shoveld.toml").write_text("[shovel]\nid = 1\n")
+    assert find_config() == "shoveld.toml"
+    assert main(["check-config"]) == 2  # it reads the local file, and names it
+    assert "shoveld.toml" in capsys.readouterr().err
+    monkeypatch.setenv("SHOVELD_CONFIG", str(tmp_path / "other.toml"))
+    assert find_config() == str(tmp_path / "other.toml")
 
 
 def test_database_is_plain_sqlite(tmp_path: Path) -> None:
@@ -144,3 +164,11 @@ def test_a_new_state_folder_is_owner_only_whatever_the_umask(tmp_path: Path) -> 
     finally:
         os.umask(old)
     assert stat.S_IMODE((tmp_path / "state").stat().st_mode) == 0o700
+
+
+def test_version(capsys) -> None:
+    from shoveld.cli import main
+
+    with pytest.raises(SystemExit) as e:
+        main(["--version"])
+    assert e.value.code == 0 and capsys.readouterr().out.startswith("shoveld 0.")
