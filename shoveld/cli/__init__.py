@@ -14,7 +14,7 @@ import sys
 
 SUBCOMMANDS: tuple[str, ...] = (
     "sim", "calibrate", "estimate", "diagnose", "decode", "record", "replay", "run",
-    "cab", "office", "passes", "check_config", "demo", "pki",
+    "cab", "office", "passes", "report", "check_config", "demo", "pki",
 )
 
 

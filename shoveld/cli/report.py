@@ -1,0 +1,57 @@
+"""``shoveld report``: the shift report from the pass log, as HTML (with plots) and CSV."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from shoveld.cli import CliError
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    from shoveld.paths import CONFIG_SEARCH
+
+    p = sub.add_parser(
+        "report", help="shift report: HTML page with plots, and CSV, from the pass log",
+        description="Writes DIR/index.html (one file a supervisor opens in any browser) and "
+                    "the tables as CSV: tonnes per hour, trucks against target and the "
+                    "10/10/20 rule, pass payloads and truck fill, cycle times, passes not "
+                    "weighed and why.")
+    src = p.add_mutually_exclusive_group()
+    src.add_argument("--config", default=None,
+                     help=f"daemon config whose shovel.state_dir to read (default: "
+                          f"{CONFIG_SEARCH})")
+    src.add_argument("--state-dir", default=None, help="the daemon's state directory")
+    src.add_argument("--db", default=None, help="the pass log file itself")
+    p.add_argument("--since", default=None, metavar="WHEN",
+                   help="passes that ended at or after WHEN: an ISO date or time, 12h / 2d "
+                        "back from now, today or yesterday (default: the whole log)")
+    p.add_argument("--until", default=None, metavar="WHEN", help="... and before WHEN")
+    p.add_argument("--out", required=True, metavar="DIR", help="folder to write (created)")
+    p.add_argument("--title", default="Shift report")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from shoveld.cli.passes import _db, parse_when
+    from shoveld.daemon.persist import read_passes
+    from shoveld.report.figures import shift_figures
+    from shoveld.report.write import write_report
+
+    since = parse_when(args.since) if args.since else None
+    until = parse_when(args.until) if args.until else None
+    path = _db(args)
+    try:
+        rows = read_passes(path, since, until)
+    except FileNotFoundError as e:
+        raise CliError(str(e)) from None
+    except Exception as e:  # noqa: BLE001 - sqlite3.DatabaseError: not a pass log
+        raise CliError(f"{path}: cannot read the pass log: {e}") from None
+    figures = shift_figures(rows, since, until)
+    try:
+        page = write_report(figures, Path(args.out), args.title)
+    except OSError as e:
+        raise CliError(f"--out {args.out}: {e.strerror or e}") from None
+    print(f"wrote {page} ({len(rows)} passes, {len(figures.trucks)} trucks, "
+          f"{figures.total_kg / 1000:.1f} t)")
+    return 0

@@ -1,0 +1,82 @@
+"""The figures of a shift report, from the pass log's rows (``persist.read_passes``).
+
+Kept apart from the HTML so every number a supervisor reads is computed once and
+tested directly.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Any
+
+from shoveld.payload.trucks import Truck, rule_101020
+
+EXCHANGE_GAP_S = 120.0
+"""Passes further apart than this are not one cycle after the other (a truck exchange,
+a break): their interval is not a cycle time."""
+
+
+@dataclass
+class ShiftFigures:
+    since: float
+    until: float
+    passes: list[dict[str, Any]]
+    trucks: list[dict[str, Any]] = field(default_factory=list)
+    rule: dict[str, Any] = field(default_factory=dict)
+    hours: list[tuple[float, float, int]] = field(default_factory=list)
+    """(hour start, tonnes of valid passes that ended in it, passes)."""
+    cycle_s: list[float] = field(default_factory=list)
+    invalid: list[dict[str, Any]] = field(default_factory=list)
+    reasons: Counter[str] = field(default_factory=Counter)
+
+    @property
+    def valid_kg(self) -> list[float]:
+        return [float(p["payload_kg"]) for p in self.passes
+                if p["valid"] and p["payload_kg"] is not None]
+
+    @property
+    def total_kg(self) -> float:
+        return sum(self.valid_kg)
+
+
+def shift_figures(rows: list[dict[str, Any]], since: float | None = None,
+                  until: float | None = None) -> ShiftFigures:
+    """Trucks against their targets, the 10/10/20 rule over the closed ones, tonnes per
+    hour, cycle times and invalid passes."""
+    ends = [float(r["end"]) for r in rows]
+    since = min(ends) if since is None and ends else (since or 0.0)
+    until = max(ends) if until is None and ends else (until or 0.0)
+    f = ShiftFigures(since, until, rows)
+    by_truck: dict[int, Truck] = {}
+    closed: dict[int, bool] = {}
+    for r in rows:
+        t = by_truck.setdefault(int(r["truck"]),
+                                Truck(int(r["truck"]), float(r["truck_target_kg"] or 1.0)))
+        t.passes.append({"payload_kg": r["payload_kg"], "std_kg": r["std_kg"] or 0.0,
+                         "valid": r["valid"]})
+        closed[int(r["truck"])] = bool(r["truck_closed"])
+    for n, t in sorted(by_truck.items()):
+        d = t.as_dict()
+        d["closed"] = closed[n]
+        f.trucks.append(d)
+    f.rule = rule_101020([t for n, t in sorted(by_truck.items()) if closed[n]])
+    if rows:
+        h0 = math.floor(since / 3600.0) * 3600.0
+        n_hours = max(1, math.ceil((until - h0) / 3600.0 + 1e-9))
+        kg = [0.0] * n_hours
+        count = [0] * n_hours
+        for r in rows:
+            k = min(n_hours - 1, int((float(r["end"]) - h0) // 3600))
+            count[k] += 1
+            if r["valid"] and r["payload_kg"] is not None:
+                kg[k] += float(r["payload_kg"])
+        f.hours = [(h0 + 3600.0 * k, kg[k] / 1000.0, count[k]) for k in range(n_hours)]
+    for a, b in zip(rows, rows[1:], strict=False):
+        gap = float(b["end"]) - float(a["end"])
+        if a["truck"] == b["truck"] and 0 < gap <= EXCHANGE_GAP_S:
+            f.cycle_s.append(gap)
+    f.invalid = [r for r in rows if not r["valid"]]
+    f.reasons = Counter(str(r["reason"] or "unknown") for r in f.invalid)
+    return f

@@ -1,0 +1,170 @@
+"""The shift report on disk: ``index.html`` (one file, plots inside it, opens in any
+browser with no other software), the same plots as PNG, and the tables as CSV."""
+
+from __future__ import annotations
+
+import base64
+import csv
+import datetime as dt
+import html
+import io
+from pathlib import Path
+from typing import Any
+
+from shoveld.report.figures import ShiftFigures
+
+
+def _when(t: float) -> str:
+    return dt.datetime.fromtimestamp(t).astimezone().strftime("%Y-%m-%d %H:%M")
+
+
+def _plots(f: ShiftFigures) -> dict[str, bytes]:
+    """PNG bytes of each plot (matplotlib, Agg), legible on a printed page."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    plt.rcParams.update({"font.size": 13, "axes.titlesize": 15, "axes.labelsize": 13})
+    out: dict[str, bytes] = {}
+
+    def save(name: str, fig: Any) -> None:
+        buf = io.BytesIO()
+        fig.tight_layout()
+        fig.savefig(buf, format="png", dpi=110)
+        plt.close(fig)
+        out[name] = buf.getvalue()
+
+    if f.hours:
+        fig, ax = plt.subplots(figsize=(8, 3.6))
+        labels = [dt.datetime.fromtimestamp(h).astimezone().strftime("%H:00") for h, _, _ in
+                  f.hours]
+        ax.bar(range(len(f.hours)), [t for _, t, _ in f.hours], color="#2b6cb0")
+        ax.set_xticks(range(len(f.hours)), labels, rotation=45 if len(labels) > 8 else 0)
+        ax.set_xlabel("hour (local time)")
+        ax.set_ylabel("tonnes loaded (t)")
+        ax.set_title("Tonnes per hour")
+        save("tonnes_per_hour", fig)
+    if f.valid_kg:
+        fig, ax = plt.subplots(figsize=(6, 3.6))
+        ax.hist([k / 1000 for k in f.valid_kg], bins=20, color="#2b6cb0")
+        ax.set_xlabel("pass payload (t)")
+        ax.set_ylabel("passes")
+        ax.set_title("Pass payloads")
+        save("pass_payloads", fig)
+    fills = [t["fill_pct"] for t in f.trucks if t["closed"]]
+    if fills:
+        fig, ax = plt.subplots(figsize=(6, 3.6))
+        ax.hist(fills, bins=15, color="#2b6cb0")
+        for x, c in ((100, "black"), (110, "#b35900"), (120, "#c40000")):
+            ax.axvline(x, color=c, linestyle="--", linewidth=1.5)
+        ax.set_xlabel("truck fill (% of target)")
+        ax.set_ylabel("trucks")
+        ax.set_title("Truck fill (closed trucks)")
+        save("truck_fill", fig)
+    if f.cycle_s:
+        fig, ax = plt.subplots(figsize=(6, 3.6))
+        ax.hist(f.cycle_s, bins=20, color="#2b6cb0")
+        ax.set_xlabel("cycle time, dump to dump (s)")
+        ax.set_ylabel("cycles")
+        ax.set_title("Cycle times")
+        save("cycle_times", fig)
+    return out
+
+
+def write_csv(f: ShiftFigures, out: Path) -> None:
+    with open(out / "passes.csv", "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(["pass", "truck", "shovel", "start", "end", "payload_kg", "std_kg", "valid",
+                    "reason"])
+        for p in f.passes:
+            w.writerow([p["pass"], p["truck"], p["shovel"], _when(p["start"]), _when(p["end"]),
+                        "" if p["payload_kg"] is None else f"{p['payload_kg']:.1f}",
+                        "" if p["std_kg"] is None else f"{p['std_kg']:.1f}", int(p["valid"]),
+                        p["reason"]])
+    with open(out / "trucks.csv", "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(["truck", "passes", "invalid_passes", "total_kg", "target_kg", "fill_pct",
+                    "status", "closed"])
+        for t in f.trucks:
+            w.writerow([t["truck"], t["passes"], t["invalid_passes"], f"{t['total_kg']:.1f}",
+                        f"{t['target_kg']:.1f}", t["fill_pct"], t["status"], int(t["closed"])])
+    with open(out / "hours.csv", "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(["hour", "tonnes", "passes"])
+        for h, tonnes, n in f.hours:
+            w.writerow([_when(h), f"{tonnes:.2f}", n])
+
+
+def write_report(f: ShiftFigures, out: Path, title: str = "Shift report") -> Path:
+    """Write the report into ``out`` (created); returns the HTML file."""
+    out.mkdir(parents=True, exist_ok=True)
+    write_csv(f, out)
+    plots = _plots(f)
+    for name, png in plots.items():
+        (out / f"{name}.png").write_bytes(png)
+    e = html.escape
+    r = f.rule
+    valid = f.valid_kg
+    lines = [
+        "<!doctype html><html lang='en'><head><meta charset='utf-8'>",
+        f"<title>{e(title)}</title><style>",
+        "body{font:16px/1.4 'DejaVu Sans',Arial,sans-serif;margin:2rem;max-width:70rem}",
+        "table{border-collapse:collapse;margin:.5rem 0 1.5rem}",
+        "td,th{border-bottom:1px solid #ccc;padding:.2rem .6rem;text-align:right}",
+        "td:first-child,th:first-child{text-align:left}.bad{color:#c40000}",
+        "img{max-width:100%;margin:.5rem 1rem .5rem 0}",
+        "</style></head><body>",
+        f"<h1>{e(title)}</h1>",
+        f"<p>{_when(f.since)} to {_when(f.until)} &middot; {len(f.passes)} passes "
+        f"({len(f.invalid)} not weighed) &middot; {len(f.trucks)} trucks &middot; "
+        f"<b id='total'>{f.total_kg / 1000:.1f} t</b> loaded"
+        + (f" &middot; mean pass {sum(valid) / len(valid) / 1000:.1f} t" if valid else "")
+        + "</p>",
+        "<h2>10/10/20 rule (closed trucks)</h2>",
+    ]
+    if r.get("trucks"):
+        lines.append(
+            f"<p id='rule'>{r['trucks']} trucks, mean {r['mean_kg'] / 1000:.1f} t = "
+            f"{r['mean_pct']} % of target; {r['over_110_pct']} % over 110 % (at most 10 % "
+            f"allowed); {r['over_120']} over 120 % (none allowed): <b"
+            + ("" if r["compliant"] else " class='bad'") + ">"
+            + ("within the rule" if r["compliant"] else "OUTSIDE the rule") + "</b>."
+            + (" Trucks are being sent under-loaded (mean below 90 %)."
+               if r["mean_pct"] < 90 else "") + "</p>")
+    else:
+        lines.append("<p>No truck was closed in this period.</p>")
+    lines += ["<h2>Trucks</h2><table id='trucks'><tr><th>truck</th><th>passes</th>"
+              "<th>loaded (t)</th><th>target (t)</th><th>fill</th><th>status</th></tr>"]
+    for t in f.trucks:
+        cls = " class='bad'" if t["status"].startswith("over") else ""
+        lines.append(f"<tr{cls}><td>{t['truck']}</td><td>{t['passes']}</td>"
+                     f"<td>{t['total_kg'] / 1000:.1f}</td><td>{t['target_kg'] / 1000:.0f}</td>"
+                     f"<td>{t['fill_pct']} %</td><td>{e(t['status'])}"
+                     f"{'' if t['closed'] else ' (open)'}</td></tr>")
+    lines.append("</table>")
+    for name, alt in (("tonnes_per_hour", "tonnes per hour"), ("pass_payloads", "pass payloads"),
+                      ("truck_fill", "truck fill"), ("cycle_times", "cycle times")):
+        if name in plots:
+            b64 = base64.b64encode(plots[name]).decode()
+            lines.append(f"<img alt='{alt}' src='data:image/png;base64,{b64}'>")
+    if f.cycle_s:
+        cs = sorted(f.cycle_s)
+        lines.append(f"<p>Cycle time (dump to dump, same truck): median "
+                     f"{cs[len(cs) // 2]:.0f} s over {len(cs)} cycles.</p>")
+    lines.append("<h2>Passes not weighed</h2>")
+    if f.invalid:
+        lines.append("<table id='invalid'><tr><th>pass</th><th>truck</th><th>ended</th>"
+                     "<th>reason</th></tr>")
+        for p in f.invalid:
+            lines.append(f"<tr><td>{p['pass']}</td><td>{p['truck']}</td>"
+                         f"<td>{_when(p['end'])}</td><td>{e(str(p['reason']))}</td></tr>")
+        lines.append("</table><p>By reason: " + "; ".join(
+            f"{e(k)}: {v}" for k, v in f.reasons.most_common()) + "</p>")
+    else:
+        lines.append("<p>None.</p>")
+    lines.append("<p>Tables: <a href='passes.csv'>passes.csv</a>, <a href='trucks.csv'>"
+                 "trucks.csv</a>, <a href='hours.csv'>hours.csv</a>.</p></body></html>")
+    page = out / "index.html"
+    page.write_text("\n".join(lines), encoding="utf-8")
+    return page

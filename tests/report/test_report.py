@@ -1,0 +1,83 @@
+"""``shoveld report``: a shift's pass log, written through the daemon's own pass-log API,
+turned into the supervisor's page and tables; the figures against sums made here."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from shoveld.cli import main
+from shoveld.daemon.persist import PassLog, db_path
+
+T0 = 1_790_000_000.0
+TARGET = 136000.0
+
+
+def shift(tmp_path: Path) -> tuple[Path, list[dict[str, Any]]]:
+    """Six trucks over about three hours: one over 110 %, passes not weighed, one truck
+    left open."""
+    rng = np.random.default_rng(4)
+    log = PassLog(db_path(tmp_path), "s1")
+    made: list[dict[str, Any]] = []
+    t, n = T0, 0
+    for truck in range(1, 7):
+        loads = [float(x) for x in rng.uniform(28000, 36000, 4)]
+        if truck == 3:
+            loads = [33000.0] * 4 + [20000.0]  # 111.8 %: over 110 %, not 120 %
+        for k, kg in enumerate(loads):
+            n += 1
+            valid = not (truck == 2 and k == 1)
+            p = {"pass": n, "truck": truck, "payload_kg": kg if valid else None,
+                 "std_kg": 300.0 if valid else None, "start_s": t - T0, "end_s": t - T0 + 20,
+                 "samples": 500, "valid": valid, "reason": "" if valid else "laser silent"}
+            log.write_pass(p, t, t + 20.0, TARGET)
+            made.append({**p, "end": t + 20.0})
+            t += 45.0 + float(rng.uniform(0, 10))
+        if truck < 6:
+            log.close_truck(truck, TARGET, t)
+            t += 600.0
+    log.close()
+    return db_path(tmp_path), made
+
+
+def test_report_tables_and_page(tmp_path: Path) -> None:
+    db, made = shift(tmp_path)
+    out = tmp_path / "report"
+    assert main(["report", "--db", str(db), "--out", str(out)]) == 0
+    trucks = {int(r["truck"]): r for r in csv.DictReader(open(out / "trucks.csv"))}
+    assert sorted(trucks) == [1, 2, 3, 4, 5, 6]
+    for k, r in trucks.items():
+        want = sum(p["payload_kg"] for p in made if p["truck"] == k and p["valid"])
+        assert float(r["total_kg"]) == pytest.approx(want, abs=0.05)
+        assert r["closed"] == ("1" if k < 6 else "0")
+    assert trucks[3]["status"] == "over_110" and trucks[2]["invalid_passes"] == "1"
+    hours = list(csv.DictReader(open(out / "hours.csv")))
+    assert sum(float(h["tonnes"]) for h in hours) == pytest.approx(
+        sum(p["payload_kg"] for p in made if p["valid"]) / 1000, abs=0.05)
+    assert sum(int(h["passes"]) for h in hours) == len(made)
+    page = (out / "index.html").read_text()
+    # the 10/10/20 line over the five closed trucks: one of five over 110 % is 20 %
+    assert "5 trucks" in page and "20.0 % over 110 %" in page and "OUTSIDE the rule" in page
+    assert "laser silent" in page
+    assert page.count("data:image/png;base64,") == 4  # every plot inside the one file
+    for name in ("tonnes_per_hour", "pass_payloads", "truck_fill", "cycle_times"):
+        assert (out / f"{name}.png").stat().st_size > 5000
+
+
+def test_report_of_a_period_and_of_an_empty_log(tmp_path: Path, capsys) -> None:
+    db, made = shift(tmp_path)
+    out = tmp_path / "r2"
+    since = str(made[10]["end"] - 1)
+    assert main(["report", "--db", str(db), "--out", str(out), "--since", since]) == 0
+    rows = list(csv.DictReader(open(out / "passes.csv")))
+    assert len(rows) == len(made) - 10
+    assert main(["report", "--db", str(db), "--out", str(tmp_path / "r3"), "--since",
+                 str(T0 + 10 * 86400)]) == 0
+    assert "No truck was closed" in (tmp_path / "r3" / "index.html").read_text()
+    assert main(["report", "--db", str(tmp_path / "none.sqlite"), "--out",
+                 str(tmp_path / "r4")]) == 2
+    assert "none.sqlite" in capsys.readouterr().err
