@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
 from shoveld.cli import CliError
+from shoveld.endpoints import endpoint_arg
 
 if TYPE_CHECKING:
     from shoveld.daemon.config import TlsConfig
@@ -35,6 +36,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "truck and the truck total against target. Connects to the daemon on "
                     "this machine by default.")
     p.add_argument("--connect", action="append", default=None, metavar="ENDPOINT",
+                   type=endpoint_arg,
                    help="Zenoh endpoint to connect to (repeatable; default "
                         "tcp/127.0.0.1:7447)")
     p.add_argument("--mode", choices=("client", "peer"), default="client")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from shoveld.cli.cab import add_tls_arg, run_web
+from shoveld.endpoints import endpoint_arg
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -17,6 +18,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--web", action="store_true", default=True,
                    help="serve the page (the only form; kept for symmetry with 'cab --web')")
     p.add_argument("--connect", action="append", default=None, metavar="ENDPOINT",
+                   type=endpoint_arg,
                    help="Zenoh endpoint to connect to (repeatable; default tcp/127.0.0.1:7447)")
     p.add_argument("--mode", choices=("client", "peer"), default="client")
     p.add_argument("--shovel", default="*", help="shovel ids to show (default: all)")

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from shoveld.cli import CliError
+from shoveld.endpoints import endpoint_arg
 
 if TYPE_CHECKING:
     from shoveld.daemon.config import DaemonConfig
@@ -46,8 +47,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--id", default=None, help="shovel id on Zenoh (default: the config's, "
                    "else 'replay')")
     p.add_argument("--listen", action="append", default=None, metavar="ENDPOINT",
+                   type=endpoint_arg,
                    help="Zenoh listen endpoint (repeatable; default tcp/127.0.0.1:7447)")
-    p.add_argument("--connect", action="append", default=None, metavar="ENDPOINT")
+    p.add_argument("--connect", action="append", default=None, metavar="ENDPOINT",
+                   type=endpoint_arg, help="Zenoh endpoint to connect to (repeatable)")
     p.add_argument("--mode", choices=("peer", "client"), default=None)
     p.add_argument("--zenoh-wait", type=float, default=2.0,
                    help="seconds to wait for the Zenoh session before playing")

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from shoveld.cycle.phases import PhaseConfig
+from shoveld.endpoints import endpoint_error
 from shoveld.engine.loop import NEEDED, EngineConfig
 from shoveld.installation import Installation
 from shoveld.paths import DEFAULT_CONFIG as DEFAULT_CONFIG  # re-exported
@@ -481,9 +482,9 @@ def parse_config(doc: Mapping[str, Any], where: str = "<config>",
     connect = zr.strings("connect", ())
     for k, eps in (("listen", listen), ("connect", connect)):
         for ep in eps:
-            if not re.fullmatch(r"[a-z0-9]+/.+", ep):
-                raise zr.fail(k, f"endpoint {ep!r} is not PROTO/ADDRESS (e.g. "
-                                 "'tcp/10.0.0.5:7447')")
+            why = endpoint_error(ep)
+            if why:
+                raise zr.fail(k, why)
     if mode == "client" and not connect:
         raise zr.fail("connect", "is required in client mode (the site's router endpoints)")
     prefix = zr.string("prefix", "shovel")
@@ -565,6 +566,9 @@ def load_config(path: str | Path, check_drivers: bool = True,
         text = p.read_text(encoding="utf-8")
     except OSError as e:
         raise ConfigError(f"{p}: cannot read: {e.strerror}") from None
+    except UnicodeDecodeError as e:
+        raise ConfigError(f"{p}: not a text file (byte {e.start} is not UTF-8); expected the "
+                          "daemon's TOML configuration") from None
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:

@@ -121,6 +121,9 @@ def load_params(path: str | Path) -> ModelParams:
         doc = tomllib.loads(Path(path).read_text(encoding="utf-8"))
     except OSError as e:
         raise ParamsFileError(f"{spath}: cannot read: {e.strerror}") from None
+    except UnicodeDecodeError as e:
+        raise ParamsFileError(f"{spath}: not a text file (byte {e.start} is not UTF-8); "
+                              "expected a params file written by 'shoveld calibrate'") from None
     except tomllib.TOMLDecodeError as e:
         raise ParamsFileError(f"{spath}: not valid TOML: {e}") from None
 
@@ -137,6 +140,8 @@ def load_params(path: str | Path) -> ModelParams:
         raise ParamsFileError(f"{spath}: key 'format' is {fmt!r}, expected {PARAMS_FORMAT!r}")
     terms = need(doc, "terms", "", list)
     hyper = doc.get("hyper", {})
+    if not isinstance(hyper, dict) or not all(isinstance(v, dict) for v in hyper.values()):
+        raise ParamsFileError(f"{spath}: key 'hyper' must be a table of tables (one per term)")
     try:
         model = Model.from_names(terms, hyper)
     except ValueError as e:
@@ -145,8 +150,16 @@ def load_params(path: str | Path) -> ModelParams:
     values, stderr = [], []
     for n in model.param_names:
         entry = need(params, n, "params.", dict)
-        values.append(float(need(entry, "value", f"params.{n}.", (int, float))))
-        stderr.append(float(entry.get("stderr", math.nan)))
+        v = float(need(entry, "value", f"params.{n}.", (int, float)))
+        if not math.isfinite(v):
+            raise ParamsFileError(f"{spath}: key 'params.{n}.value' is {v}; expected a finite "
+                                  "number")
+        values.append(v)
+        se = entry.get("stderr", math.nan)
+        if not isinstance(se, int | float) or (math.isfinite(se) and se < 0) or se == math.inf:
+            raise ParamsFileError(f"{spath}: key 'params.{n}.stderr' must be a non-negative "
+                                  f"number (or nan when unknown), got {se!r}")
+        stderr.append(float(se))
     extra = set(params) - set(model.param_names)
     if extra:
         raise ParamsFileError(f"{spath}: keys {sorted('params.' + e for e in extra)} belong to "
@@ -156,13 +169,26 @@ def load_params(path: str | Path) -> ModelParams:
     for eq, v in noise.items():
         if not (math.isfinite(v) and v > 0):
             raise ParamsFileError(f"{spath}: key 'noise.{eq}' must be a positive number")
+    # The covariance carries the calibration's uncertainty into every pass's std: a file
+    # without it (hand-written, or cut) falls back to the standard errors alone, and one
+    # that is there must fit the parameters.
     cov_d = doc.get("covariance", {})
+    if not isinstance(cov_d, dict):
+        raise ParamsFileError(f"{spath}: key 'covariance' must be a table")
     n = len(values)
     cov = np.diag(np.square(np.nan_to_num(stderr)))
-    if cov_d.get("names") == model.param_names:
-        c = np.asarray(cov_d.get("matrix"), dtype=float)
-        if c.shape == (n, n):
-            cov = c
+    if cov_d:
+        if cov_d.get("names") != model.param_names:
+            raise ParamsFileError(f"{spath}: key 'covariance.names' must list the parameters "
+                                  f"{model.param_names} in that order")
+        try:
+            c = np.asarray(cov_d.get("matrix"), dtype=float)
+        except (TypeError, ValueError):
+            c = np.zeros(0)
+        if c.shape != (n, n) or not np.all(np.isfinite(c)):
+            raise ParamsFileError(f"{spath}: key 'covariance.matrix' must be a {n} x {n} table "
+                                  "of finite numbers")
+        cov = c
     from shoveld.model.output import CHANNELS, NOISE_KEYS
 
     current_noise: dict[str, dict[str, float]] = {}

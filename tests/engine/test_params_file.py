@@ -1,0 +1,69 @@
+"""A params file that is not what ``calibrate`` writes is refused with one line naming
+the file and the key; nothing non-finite gets into the engine."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+from shoveld.cli import main
+from shoveld.model.params import ParamsFileError, load_params
+
+GOOD = Path(__file__).resolve().parents[2] / "hil_fixtures" / "captures" / "daemon-e2e" / \
+    "params.toml"
+
+
+def variant(tmp_path: Path, old: str, new: str, count: int = 1) -> Path:
+    text = GOOD.read_text()
+    assert old in text, old
+    p = tmp_path / "params.toml"
+    p.write_text(text.replace(old, new, count))
+    return p
+
+
+def first_value(text: str) -> str:
+    return re.search(r"^value = .*$", text, re.M).group(0)  # type: ignore[union-attr]
+
+
+@pytest.mark.parametrize("value,key", [("nan", "value"), ("inf", "value"), ("-inf", "value")])
+def test_non_finite_values_are_refused(tmp_path: Path, value: str, key: str) -> None:
+    p = variant(tmp_path, first_value(GOOD.read_text()), f"value = {value}")
+    with pytest.raises(ParamsFileError, match=r"params\.\w+\.value.*finite"):
+        load_params(p)
+
+
+def test_a_file_that_is_not_text(tmp_path: Path) -> None:
+    p = tmp_path / "params.toml"
+    p.write_bytes(b"\xff\xfe\x00binary")
+    with pytest.raises(ParamsFileError, match="not a text file"):
+        load_params(p)
+
+
+def test_a_covariance_that_does_not_fit_is_refused(tmp_path: Path) -> None:
+    text = GOOD.read_text()
+    assert "[covariance]" in text
+    p = variant(tmp_path, "[covariance]\nnames = [", "[covariance]\nnames = [\"x\", ")
+    with pytest.raises(ParamsFileError, match="covariance.names"):
+        load_params(p)
+
+
+def test_a_missing_covariance_falls_back_to_the_standard_errors(tmp_path: Path) -> None:
+    text = GOOD.read_text()
+    cut = re.sub(r"\[covariance\]\n.*?(?=^\[|\Z)", "", text, flags=re.S | re.M)
+    assert "[covariance]" not in cut and "[noise]" in cut
+    p = tmp_path / "params.toml"
+    p.write_text(cut)
+    got = load_params(p)
+    assert got.cov.shape == (len(got.values),) * 2
+    assert got.cov[0, 0] == pytest.approx(got.stderr[0] ** 2)
+
+
+def test_estimate_with_a_bad_params_file_is_one_line(tmp_path: Path, capsys) -> None:
+    p = variant(tmp_path, first_value(GOOD.read_text()), "value = nan")
+    table = tmp_path / "t.csv"
+    table.write_text("# format: shovel-signals/1\n")
+    assert main(["estimate", "--params", str(p), str(table)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "params.toml" in err and "Traceback" not in err
