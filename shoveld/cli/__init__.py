@@ -62,3 +62,18 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except BrokenPipeError:
         return 0
+    except OSError as e:
+        # A file the command was told to read or write is missing, in a folder that is
+        # not there, or not permitted: the user's to fix, so one line naming it. An
+        # OSError without a file name is not that, and keeps its traceback.
+        if e.filename is None:
+            raise
+        import os
+
+        hint = ""
+        parent = os.path.dirname(os.fspath(e.filename)) or "."
+        if isinstance(e, FileNotFoundError) and not os.path.isdir(parent):
+            hint = f" (the folder {parent} does not exist)"
+        print(f"shoveld {args.command}: error: {e.filename}: {e.strerror}{hint}",
+              file=sys.stderr)
+        return 2

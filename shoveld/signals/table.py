@@ -149,7 +149,11 @@ def read_table(path: str | Path, text: str | None = None) -> SignalsTable:
     if i >= len(lines):
         raise SignalsFormatError(spath, None, None, "no header line (expected the column names)")
     header_line = i + 1
-    header = [h.strip() for h in next(csv.reader([lines[i].lstrip("\ufeff")]))]
+    try:
+        header = [h.strip() for h in next(csv.reader([lines[i].lstrip("\ufeff")]))]
+    except csv.Error as e:
+        raise SignalsFormatError(spath, header_line, None,
+                                 f"not a CSV header line ({e})") from None
     missing = [c for c in COLUMN_NAMES if c not in header]
     if missing:
         raise SignalsFormatError(spath, header_line, missing[0],
@@ -163,7 +167,17 @@ def read_table(path: str | Path, text: str | None = None) -> SignalsTable:
     rows: list[list[float]] = []
     linenos: list[int] = []
     reader = csv.reader(io.StringIO("\n".join(lines[i + 1:])))
-    for k, cells in enumerate(reader):
+    k = -1
+    while True:
+        k += 1
+        try:
+            cells = next(reader)
+        except StopIteration:
+            break
+        except csv.Error as e:  # a cell longer than the csv module's limit, a stray quote
+            raise SignalsFormatError(spath, header_line + reader.line_num, None,
+                                     f"not a CSV row ({e}); expected {len(COLUMN_NAMES)} "
+                                     "numbers") from None
         lineno = header_line + 1 + k
         if not cells or (len(cells) == 1 and not cells[0].strip()):
             continue

@@ -67,3 +67,20 @@ def test_estimate_with_a_bad_params_file_is_one_line(tmp_path: Path, capsys) -> 
     assert main(["estimate", "--params", str(p), str(table)]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "params.toml" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("argv", [["sim", "--passes", "1", "--out", "{d}/no/such/s.csv"],
+                                  ["calibrate", "--out", "{d}/no/such/p.toml", "{d}/t.csv",
+                                   "{d}/t1.csv"]])
+def test_an_output_in_a_missing_folder_is_one_line(tmp_path: Path, capsys,
+                                                   argv: list[str]) -> None:
+    from shoveld.signals.table import write_table
+    from shoveld.sim.scenario import simulate_calibration
+
+    for name, load in (("t.csv", 0.0), ("t1.csv", 8420.0)):
+        write_table(tmp_path / name, simulate_calibration(load, 1, n_poses=6, free_motion_s=30,
+                                                          fast_moves=0).table)
+    assert main([a.format(d=tmp_path) for a in argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err
+    assert "no/such" in err and "does not exist" in err

@@ -88,3 +88,12 @@ def test_not_utf8(tmp_path: Path) -> None:
 def test_missing_file(tmp_path: Path) -> None:
     with pytest.raises(SignalsFormatError, match="cannot read"):
         read_table(tmp_path / "nope.csv")
+
+
+def test_a_cell_too_long_for_csv_is_a_format_error_with_its_line() -> None:
+    from shoveld.signals.columns import COLUMN_NAMES
+    from shoveld.signals.table import SignalsFormatError, read_table
+
+    text = "# format: shovel-signals/1\n" + ",".join(COLUMN_NAMES) + "\n" + "9" * 200_000 + "\n"
+    with pytest.raises(SignalsFormatError, match=r"t\.csv:3: not a CSV row"):
+        read_table("t.csv", text)
