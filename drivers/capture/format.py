@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import json
+import logging
 import math
 import os
 import threading
@@ -164,6 +165,23 @@ def _json_line(path: Path, lineno: int, text: str) -> dict[str, Any]:
     return obj
 
 
+log = logging.getLogger(__name__)
+
+
+def _record(path: Path, lineno: int, text: str) -> dict[str, Any] | None:
+    """One record; None for a torn last line. A recorder cut by a power failure leaves
+    its last line without its newline and half written: the capture is replayed up to
+    it, and the log says where it stopped. A bad line anywhere else is an error."""
+    if text.endswith("\n"):
+        return _json_line(path, lineno, text)
+    try:
+        return _json_line(path, lineno, text)
+    except CaptureFormatError as e:
+        log.warning("%s:%d: the last line is cut off (the recording was interrupted); replayed "
+                    "up to line %d (%s)", path, lineno, lineno - 1, e)
+        return None
+
+
 def _lines(path: Path) -> Iterator[tuple[int, str]]:
     try:
         f = open(path, encoding="utf-8")
@@ -212,7 +230,9 @@ def read_serial_chunks(path: str | os.PathLike[str]) -> Iterator[SerialChunk]:
     _header(p, it, SERIAL_FORMAT)
     prev = -math.inf
     for lineno, text in it:
-        obj = _json_line(p, lineno, text)
+        obj = _record(p, lineno, text)
+        if obj is None:
+            return
         prev = _time(p, lineno, obj, prev)
         d = obj.get("d")
         if d not in ("rx", "tx"):
@@ -243,7 +263,9 @@ def read_modbus_reads(path: str | os.PathLike[str]) -> Iterator[RegisterRead]:
     _header(p, it, MODBUS_FORMAT)
     prev = -math.inf
     for lineno, text in it:
-        obj = _json_line(p, lineno, text)
+        obj = _record(p, lineno, text)
+        if obj is None:
+            return
         prev = _time(p, lineno, obj, prev)
         unit = _int(p, lineno, obj, "unit", 0, 255)
         fc = _int(p, lineno, obj, "fc", 3, 4)

@@ -292,3 +292,36 @@ def test_virtual_shovel_with_can_mti_and_rtu_modules(tmp_path: Path) -> None:
     incl = [r for r in cap.modbus_reads("adc_incl") if r.registers]
     assert INCLINOMETER_CHANNELS.decode(0, incl[-1].registers)["roll_deg"] == pytest.approx(
         1.5, abs=0.01)
+
+
+def test_a_capture_torn_by_a_power_cut_replays_up_to_the_tear(tmp_path: Path) -> None:
+    """The recorder's last line, cut off mid-write, is not an error: the replay plays what
+    is there and says where it stopped."""
+    import shutil
+    import subprocess
+    import sys
+
+    src = Path(__file__).resolve().parents[2] / "hil_fixtures" / "captures" / "daemon-e2e"
+    cap = tmp_path / "cap"
+    shutil.copytree(src, cap)
+    for name in ("laser.serial.jsonl", "adc_motors.modbus.jsonl"):
+        f = cap / name
+        data = f.read_bytes()
+        f.write_bytes(data[:-25])  # the last record loses its end and its newline
+        lines = data[:-25].count(b"\n") + 1
+    r = subprocess.run([sys.executable, "-m", "shoveld", "replay", str(cap), "--fast",
+                        "--state-dir", str(tmp_path / "state")],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert "adc_motors.modbus.jsonl:" in r.stderr and "cut off" in r.stderr
+    assert f"up to line {lines - 1}" in r.stderr
+    # a bad line that is not the last is still an error naming it
+    f = cap / "laser.serial.jsonl"
+    text = f.read_text().splitlines(keepends=True)
+    text[3] = "{not json\n"
+    f.write_text("".join(text))
+    r = subprocess.run([sys.executable, "-m", "shoveld", "replay", str(cap), "--fast",
+                        "--state-dir", str(tmp_path / "state2")],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode != 0 and "laser.serial.jsonl:4" in r.stderr
+    assert "Traceback" not in r.stderr
