@@ -85,13 +85,16 @@ class LineSplitter:
     """Cuts the byte stream into lines and counts what is not a line.
 
     Bytes are accumulated until LF; a line longer than ``max_line`` without LF is
-    discarded (counted as garbage) so a babbling device cannot grow the buffer.
+    discarded (counted as garbage) so a babbling device cannot grow the buffer, and so is
+    the rest of it up to the next LF: the tail of an overlong line ("...12345\r\n") is
+    not a distance.
     """
 
     def __init__(self, max_line: int = 32) -> None:
         self.max_line = max_line
         self._buf = bytearray()
         self.overflow_bytes = 0
+        self._skipping = False
 
     def feed(self, data: bytes) -> list[bytes]:
         self._buf += data
@@ -102,17 +105,28 @@ class LineSplitter:
                 break
             line = bytes(self._buf[:i])
             del self._buf[:i + 1]
+            if self._skipping:  # the end of an overlong line: garbage too
+                self._skipping = False
+                self.overflow_bytes += len(line) + 1
+                out.append(b"\x00" + line)  # reported as malformed (never parses)
+                continue
             if line.endswith(b"\r"):
                 line = line[:-1]
+            if len(line) > self.max_line:
+                self.overflow_bytes += len(line) + 1
+                out.append(b"\x00" + line)
+                continue
             out.append(line)
         if len(self._buf) > self.max_line:
             self.overflow_bytes += len(self._buf)
-            out.append(bytes(self._buf))  # reported as one malformed line
+            out.append(b"\x00" + bytes(self._buf))  # reported as one malformed line
             self._buf.clear()
+            self._skipping = True
         return out
 
     def clear(self) -> None:
         self._buf.clear()
+        self._skipping = False
 
 
 @dataclass(frozen=True)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import re
 
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -71,3 +72,13 @@ def test_stream_splitting_is_independent_of_chunking(parts: list[bytes]) -> None
     for i in range(0, len(stream), 3):
         pieces += s.feed(stream[i:i + 3])
     assert pieces == whole
+
+
+def test_the_tail_of_an_overlong_line_is_not_a_distance() -> None:
+    from drivers.acuity.ar4000 import LineSplitter, parse_line
+
+    s = LineSplitter(max_line=32)
+    lines = s.feed(b"9" * 40) + s.feed(b"45\r\n01234.5\r\n") + s.feed(b"7" * 50 + b"\r\n")
+    got = [parse_line(x, 0.001) for x in lines]
+    assert got.count(None) == 3 and got[-2] == pytest.approx(1.2345)
+    assert s.overflow_bytes == 40 + len(b"45\r\n") + len(b"7" * 50 + b"\n")
