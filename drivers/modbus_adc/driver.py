@@ -383,10 +383,14 @@ class ModbusAdcDriver(Driver):
         if rr.isError():
             code = getattr(rr, "exception_code", None)
             return None, "exception", int(code) if code is not None else 4
+        fc = getattr(rr, "function_code", c.function_code)
         regs = list(getattr(rr, "registers", []) or [])
-        if len(regs) < count:
-            return None, "exception", 3
-        return regs[:count], None, None
+        if fc != c.function_code or len(regs) != count:
+            # An answer to another question (a holding-register reply to an input-register
+            # request, or a different length) is a bad frame, not these channels' values.
+            self.health.bad_frames += 1
+            return None, "exception", None
+        return regs, None, None
 
     def poll(self, sink: Sink) -> Reading:
         """Read every block once and emit one reading (also returned)."""
@@ -429,7 +433,8 @@ class ModbusAdcDriver(Driver):
                     h["last_error"] = f"no answer within {c.timeout_s:g} s"
                 else:
                     h["exceptions"] += 1
-                    h["last_error"] = f"Modbus exception code {code}"
+                    h["last_error"] = (f"Modbus exception code {code}" if code is not None else
+                                       "a reply with another function code or length")
         now = t  # receive time of the last block, taken right after its answer
         stale_after = c.stale_after_s
         for h in self._channel_health:

@@ -214,3 +214,36 @@ def test_holding_registers_and_table_source() -> None:
             DriverRunner(fast(emu, function="holding")) as run:
         assert run.wait_for(lambda: len(run.readings) >= 3, 5)
         assert 1000.0 <= run.readings[-1].values["hoist1_a"] <= 1100.0
+
+
+@pytest.mark.parametrize("reply", ["holding", "short", "long"])
+def test_an_answer_to_another_question_is_a_bad_frame(reply: str) -> None:
+    """A reply whose function code or length is not the request's carries no values."""
+    from pymodbus.pdu.register_message import (
+        ReadHoldingRegistersResponse,
+        ReadInputRegistersResponse,
+    )
+
+    class Client:
+        connected = True
+
+        def read_input_registers(self, address: int, count: int, device_id: int) -> object:
+            if reply == "holding":
+                return ReadHoldingRegistersResponse(registers=[1000] * count)
+            return ReadInputRegistersResponse(
+                registers=[1000] * (count - 1 if reply == "short" else count + 1))
+
+        def connect(self) -> bool:
+            return True
+
+        def close(self) -> None:
+            pass
+
+    cfg = ModbusAdcConfig.from_config({"kind": "modbus_tcp", "host": "127.0.0.1", "port": 1502,
+                                       "function": "input", "channels": CHANNELS.to_config()})
+    drv = ModbusAdcDriver("adc", cfg, client_factory=lambda c: Client())
+    drv.open()
+    r = drv.poll(lambda _: None)
+    assert r.values == {} and r.invalid == {c.name for c in CHANNELS}  # no value taken
+    assert drv.health.bad_frames >= 1
+    assert "another function code" in drv.health.extra["channels"]["hoist1_a"]["last_error"]
