@@ -10,6 +10,7 @@ recovered and reported rather than fatal.
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from abc import ABC, abstractmethod
@@ -123,6 +124,18 @@ class Driver(ABC):
         return False
 
     def emit(self, sink: Sink, reading: Reading) -> None:
+        isfinite = math.isfinite
+        for v in reading.values.values():
+            if not isfinite(v):
+                # A NaN or an infinity decoded from a frame (a float field's bit pattern, a
+                # device's own "no value") is not a measurement: the quantity is invalid
+                # in this reading, never a number the loop could use.
+                bad = {k for k, x in reading.values.items() if not isfinite(x)}
+                reading = Reading(reading.device, reading.t_host,
+                                  {k: x for k, x in reading.values.items() if k not in bad},
+                                  reading.invalid | bad, reading.t_device)
+                self.health.bad_frames += 1
+                break
         self.health.messages += 1
         self.health.last_reading_t = reading.t_host
         sink(reading)

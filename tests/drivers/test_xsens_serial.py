@@ -346,3 +346,19 @@ def test_angles_from_signals_loops_holds_and_skips_unknown_rows() -> None:
     assert held(10.0) == pytest.approx((0.0, 30.0, -150.0))
     with pytest.raises(ValueError, match="need two rows"):
         angles_from_signals(SignalsTable.from_arrays(time_s=[0.0, 1.0], handle_deg=[1.0, 2.0]))
+
+
+def test_a_non_finite_value_in_a_frame_is_invalid_not_a_number() -> None:
+    """A float field whose bits decode to NaN or infinity never reaches the loop."""
+    from drivers.xsens.mtdata2 import encode_mtdata2
+
+    drv = make_driver("/dev/null")
+    payload = encode_mtdata2([(XDI.EULER_ANGLES, (float("nan"), 2.0, float("inf"))),
+                              (XDI.PACKET_COUNTER, 7)])
+    r = drv.decode(payload)
+    assert r is not None
+    got: list[Reading] = []
+    drv.emit(got.append, r)
+    assert got[0].values == {"pitch_deg": 2.0, "packet_counter": 7.0}
+    assert {"roll_deg", "yaw_deg"} <= got[0].invalid
+    assert drv.health.bad_frames == 1
