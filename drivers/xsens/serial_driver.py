@@ -128,8 +128,11 @@ class MtiSerialDriver(Driver):
         self._parser = XbusParser()
         self._counted = (0, 0)
         self._prev_counter: int | None = None
+        self._prev_frame: tuple[int, int, tuple[float, float, float]] | None = None
+        """(packet counter, sample time fine, euler) of the last full frame seen."""
         self._last_valid = 0.0
         self.health.extra.setdefault("dropped_packets", 0)
+        self.health.extra.setdefault("inconsistent_frames", 0)
         self.health.extra.setdefault("device_errors", 0)
 
     @classmethod
@@ -270,6 +273,7 @@ class MtiSerialDriver(Driver):
         self.health.extra["output_rate_hz"] = got[wanted[2][0]]
         self._command(MID.GOTO_MEASUREMENT, b"", MID.GOTO_MEASUREMENT_ACK)
         self._prev_counter = None
+        self._prev_frame = None
         self._last_valid = time.monotonic()
         log.info("%s: MTi on %s measuring at %s Hz", self.name, self.port,
                  self.health.extra["output_rate_hz"])
@@ -304,6 +308,8 @@ class MtiSerialDriver(Driver):
         pc, stf, sw = get(_PACKET_COUNTER), get(_SAMPLE_TIME_FINE), get(_STATUS_WORD)
         if (e is not None and g is not None and acc is not None and pc is not None
                 and stf is not None and sw is not None):  # the configured packet: all there
+            if not self._consistent(pc, stf, e, g, acc):
+                return None
             self._count_gap(pc)
             return Reading(self.name, t_host, {
                 "roll_deg": e[0], "pitch_deg": e[1], "yaw_deg": e[2],
@@ -311,6 +317,11 @@ class MtiSerialDriver(Driver):
                 "acc_x": acc[0], "acc_y": acc[1], "acc_z": acc[2],
                 "packet_counter": float(pc), "sample_time_fine": float(stf),
                 "status_word": float(sw)}, _NO_INVALID, stf * SAMPLE_TIME_FINE_S)
+        if self._prev_frame is not None:
+            # This device sends the configured packet; one with other or missing items is
+            # a corrupted frame that happened to pass the checksum.
+            self._inconsistent()
+            return None
         values: dict[str, float] = {}
         v = items.get(XDI.EULER_ANGLES)
         if v is None and XDI.QUATERNION in items:
@@ -339,6 +350,42 @@ class MtiSerialDriver(Driver):
             k for k in VALUE_KEYS if k not in values)
         return Reading(device=self.name, t_host=t_host, values=values, invalid=invalid,
                        t_device=stf * SAMPLE_TIME_FINE_S if stf is not None else None)
+
+    MAX_GAP = 50
+    """Packets a frame may follow the previous one by (dropped ones in between)."""
+
+    def _consistent(self, pc: int, stf: int, e: tuple[float, ...], g: tuple[float, ...],
+                    acc: tuple[float, ...]) -> bool:
+        """Does the frame agree with itself and with the one before? The Xbus checksum is
+        one byte, so about 1 in 256 corrupted frames pass it; what the frame carries
+        catches them: the packet counter and the 10 kHz sample time must advance
+        together, the values must be in the sensor's range, and the angles cannot jump
+        further than the measured rate of turn allows. A frame that fails is counted
+        and dropped; it still becomes the reference, so after a real reset of the device
+        one frame is lost, not all."""
+        prev, self._prev_frame = self._prev_frame, (pc, stf, (e[0], e[1], e[2]))
+        if not (abs(e[0]) <= 180.0 and abs(e[1]) <= 90.0 and abs(e[2]) <= 180.0
+                and max(abs(g[0]), abs(g[1]), abs(g[2])) <= 35.0  # 2000 deg/s
+                and max(abs(acc[0]), abs(acc[1]), abs(acc[2])) <= 200.0):
+            return self._inconsistent()
+        if prev is None:
+            return True
+        n = (pc - prev[0]) & 0xFFFF
+        dt = ((stf - prev[1]) & 0xFFFFFFFF) * SAMPLE_TIME_FINE_S
+        rate = float(self.health.extra.get("output_rate_hz") or self.rate_hz)
+        if not 1 <= n <= self.MAX_GAP or abs(dt - n / rate) > 0.5 / rate:
+            return self._inconsistent()
+        # 2 deg of slack, plus three times what the fastest measured rate could turn
+        limit = 2.0 + 3.0 * 57.3 * max(abs(g[0]), abs(g[1]), abs(g[2])) * dt
+        for a, b in zip(e, prev[2], strict=False):
+            if abs((a - b + 180.0) % 360.0 - 180.0) > limit:
+                return self._inconsistent()
+        return True
+
+    def _inconsistent(self) -> bool:
+        self.health.bad_frames += 1
+        self.health.extra["inconsistent_frames"] += 1
+        return False
 
     def _count_gap(self, counter: int) -> None:
         prev = self._prev_counter

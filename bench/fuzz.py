@@ -1,0 +1,265 @@
+"""Fuzz the parsers with random and mutated inputs made from the committed captures.
+
+Per parser it counts:
+
+* crashes: an exception that is not the parser's documented error;
+* hangs: one input taking longer than ``--hang-s``;
+* corruptions accepted: for the MTi (Xbus), a frame corrupted in 1-4 bytes whose
+  reading reaches the loop with values that differ from the clean frame's. The Xbus
+  checksum is one byte, so about 1 in 256 such frames pass it: the driver stops them
+  with what the frame already carries (the configured items, the packet counter and
+  sample time advancing together, values in range, angles that cannot jump). What
+  still gets through is a change in the low bits of a float; the bench also counts
+  those that move an angle by more than 0.01 deg. The AR4000's ASCII protocol has no
+  checksum at all, so a mutated digit is a valid distance: its count is printed for
+  what it is.
+
+    .venv/bin/python bench/fuzz.py [--parser all|xbus|ar4000|modbus|table|capture]
+                                   [--n 1000000] [--seed 1]
+
+Goal (issue 12): 0 crashes, 0 hangs, 0 corrupted MTi frames accepted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+import random
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+CAPTURE = ROOT / "hil_fixtures" / "captures" / "daemon-e2e"
+
+
+def rx_bytes(name: str) -> bytes:
+    from drivers.capture.format import read_serial_chunks
+
+    return b"".join(c.data for c in read_serial_chunks(CAPTURE / name) if c.direction == "rx")
+
+
+def mutate(rng: random.Random, data: bytes, max_edits: int = 4) -> bytes:
+    """Bit flips, byte changes, inserts, deletes, a cut or a splice."""
+    b = bytearray(data)
+    for _ in range(rng.randint(1, max_edits)):
+        op = rng.random()
+        k = rng.randrange(len(b)) if b else 0
+        if op < 0.35 and b:
+            b[k] ^= 1 << rng.randrange(8)
+        elif op < 0.6 and b:
+            b[k] = rng.randrange(256)
+        elif op < 0.75:
+            b[k:k] = rng.randbytes(rng.randint(1, 8))
+        elif op < 0.9 and b:
+            del b[k:k + rng.randint(1, 8)]
+        else:
+            b = b[:k] if rng.random() < 0.5 else b + b[k:k + rng.randint(1, 40)]
+    return bytes(b)
+
+
+class Tally:
+    def __init__(self, name: str, hang_s: float) -> None:
+        self.name, self.hang_s = name, hang_s
+        self.n = self.crashes = self.hangs = self.accepted = self.checked = self.severe = 0
+        self.first_crash = ""
+
+    def run(self, fn: Callable[[], Any], expected: tuple[type[BaseException], ...]) -> Any:
+        t0 = time.perf_counter()
+        out = None
+        try:
+            out = fn()
+        except expected:
+            pass
+        except Exception as e:  # noqa: BLE001 - that is what is counted
+            self.crashes += 1
+            if not self.first_crash:
+                self.first_crash = f"{type(e).__name__}: {e}"[:200]
+        if time.perf_counter() - t0 > self.hang_s:
+            self.hangs += 1
+        self.n += 1
+        return out
+
+
+ANGLES = ("roll_deg", "pitch_deg", "yaw_deg")
+
+
+def fuzz_xbus(n: int, rng: random.Random, t: Tally) -> None:
+    """Corrupt one MTData2 frame between two clean ones; parse and decode as the driver."""
+    from drivers.base import Reading
+    from drivers.xsens.serial_driver import MtiSerialDriver
+    from drivers.xsens.xbus import XbusParser, encode_frame
+
+    p = XbusParser()
+    msgs = [m for m in p.feed(rx_bytes("mti.serial.jsonl")) if m.mid == 0x36]
+    frames = [encode_frame(m.mid, m.data) for m in msgs]
+    drv = MtiSerialDriver.from_config({"port": "/dev/null"})
+    clean: list[dict[str, float]] = []
+    for m in msgs:
+        r = drv.decode(m.data)
+        clean.append(dict(r.values) if r is not None else {})
+    got: list[Reading] = []
+    for _ in range(n):
+        k = rng.randrange(1, len(frames) - 1)
+        f = bytearray(frames[k])
+        for _ in range(rng.randint(1, 4)):  # corruption inside the frame, length kept
+            j = rng.randrange(1, len(f))
+            f[j] = rng.randrange(256)
+        bad = bytes(f)
+        if bad == frames[k]:
+            continue
+
+        def one(bad: bytes = bad, k: int = k) -> None:
+            parser = XbusParser()
+            drv._prev_counter = None
+            drv._prev_frame = None
+            got.clear()
+            msgs = parser.feed(frames[k - 1] + bad + frames[k + 1])
+            if any(encode_frame(m.mid, m.data) not in frames for m in msgs):
+                t.checked += 1  # the corrupted frame passed the checksum
+            for m in msgs:
+                if m.mid == 0x36:
+                    r = drv.decode(m.data)
+                    if r is not None:
+                        drv.emit(got.append, r)
+            # Every reading that reaches the loop must be one of the clean frames' (in
+            # the quantities it gives as valid); anything else is a corruption let in.
+            for r in got:
+                if not any(all(key in c and abs(v - c[key]) <= 1e-9 * max(1.0, abs(c[key]))
+                               for key, v in r.values.items())
+                           for c in (clean[k - 1], clean[k], clean[k + 1])):
+                    t.accepted += 1
+                    # what the loop turns into joint angles, off by more than the sensor
+                    # resolves (0.01 deg)
+                    if any(abs(r.values[a] - c[a]) > 0.01 for a in ANGLES if a in r.values
+                           for c in (clean[k],)):
+                        t.severe += 1
+        t.run(one, ())
+
+
+def fuzz_ar4000(n: int, rng: random.Random, t: Tally) -> None:
+    from drivers.acuity.ar4000 import LineSplitter, parse_line
+
+    base = rx_bytes("laser.serial.jsonl")
+    clean = set(base.replace(b"\r", b"").split(b"\n"))
+    for _ in range(n):
+        a = base.find(b"\n", rng.randrange(0, max(1, len(base) - 200))) + 1
+        chunk = mutate(rng, base[a:a + rng.randint(1, 200)])
+
+        def one(chunk: bytes = chunk) -> None:
+            s = LineSplitter()
+            for line in s.feed(chunk):
+                v = parse_line(line, 0.001)
+                if v is not None and not math.isfinite(v):
+                    raise AssertionError(f"non-finite distance from {line!r}")
+                if v is not None and line not in clean:
+                    t.accepted += 1
+        t.run(one, ())
+
+
+def fuzz_text(n: int, rng: random.Random, t: Tally, kind: str) -> None:
+    """The signals table reader and the capture readers on mutated files."""
+    from drivers.capture.format import CaptureFormatError, read_modbus_reads, read_serial_chunks
+    from shoveld.signals.table import SignalsFormatError, read_table
+
+    if kind == "table":
+        from shoveld.signals.table import write_table
+        from shoveld.sim.scenario import simulate_cycles
+
+        with tempfile.TemporaryDirectory() as tmp:
+            path = Path(tmp) / "t.csv"
+            tab = simulate_cycles(1, seed=1).table
+            write_table(path, tab.slice(tab.time < 2.0))
+            base = path.read_bytes()
+        for _ in range(n):
+            data = mutate(rng, base, 6)
+
+            def one(data: bytes = data) -> None:
+                try:
+                    text = data.decode("utf-8")
+                except UnicodeDecodeError:
+                    return
+                read_table("fuzz.csv", text)
+            t.run(one, (SignalsFormatError,))
+        return
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, reader in (("laser.serial.jsonl", read_serial_chunks),
+                             ("adc_motors.modbus.jsonl", read_modbus_reads)):
+            lines = (CAPTURE / name).read_bytes().splitlines(keepends=True)
+            path = Path(tmp) / name
+            for _ in range(n // 2):
+                a = rng.randrange(1, max(2, len(lines) - 20))
+                data = mutate(rng, b"".join(lines[:1] + lines[a:a + 12]), 5)
+                path.write_bytes(data)
+
+                def one(reader: Callable[[Path], Any] = reader, path: Path = path) -> None:
+                    for _ in reader(path):
+                        pass
+                t.run(one, (CaptureFormatError,))
+
+
+def fuzz_modbus(n: int, rng: random.Random, t: Tally) -> None:
+    """Register words through the channel map's decoders (every 16-bit word, then random
+    blocks), and the raw-to-value scaling: finite values or a saturation mark."""
+    from hil_fixtures.virtual_shovel import MOTOR_CHANNELS
+
+    chans = list(MOTOR_CHANNELS)
+    decoders = [c.word_decoder() for c in chans]
+    for _ in range(n):
+        w = rng.randrange(65536)
+
+        def one(w: int = w) -> None:
+            for d in decoders:
+                v = d(w)
+                if not (math.isfinite(v) or math.isnan(v)):
+                    raise AssertionError(f"word {w} decoded to {v}")
+        t.run(one, ())
+
+
+PARSERS = ("xbus", "ar4000", "modbus", "table", "capture")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--parser", default="all", choices=("all", *PARSERS))
+    ap.add_argument("--n", type=int, default=1_000_000)
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--hang-s", type=float, default=1.0)
+    args = ap.parse_args()
+    logging.disable(logging.WARNING)  # (a torn last line is warned about, by design)
+    names = PARSERS if args.parser == "all" else (args.parser,)
+    print(f"{'parser':<9s} {'inputs':>9s} {'crashes':>8s} {'hangs':>6s} {'accepted':>9s} "
+          f"{'of':>8s} {'s':>6s}  note")
+    for name in names:
+        rng = random.Random(args.seed)
+        t = Tally(name, args.hang_s)
+        t0 = time.perf_counter()
+        if name == "xbus":
+            fuzz_xbus(args.n, rng, t)
+            note = ("readings from corrupted frames that reached the loop; 'of': corrupted "
+                    "frames that passed the checksum")
+        elif name == "ar4000":
+            fuzz_ar4000(args.n, rng, t)
+            note = "mutated lines read as a distance (the protocol has no checksum)"
+        elif name == "modbus":
+            fuzz_modbus(args.n, rng, t)
+            note = "register words through every channel decoder"
+        else:
+            fuzz_text(args.n, rng, t, name)
+            note = ("signals tables" if name == "table" else "serial and Modbus captures") + \
+                " (documented errors are not crashes)"
+        dt = time.perf_counter() - t0
+        print(f"{name:<9s} {t.n:9d} {t.crashes:8d} {t.hangs:6d} {t.accepted:9d} "
+              f"{t.checked:8d} {dt:6.0f}  {note}", flush=True)
+        if name == "xbus":
+            print(f"  of the accepted, with an angle off by more than 0.01 deg: {t.severe}")
+        if t.first_crash:
+            print(f"  first crash: {t.first_crash}", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()
