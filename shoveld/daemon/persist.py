@@ -73,8 +73,20 @@ def connect(path: str | Path, readonly: bool = False) -> sqlite3.Connection:
             raise FileNotFoundError(f"{p}: no pass log here (has the daemon run?)")
         # as_uri() percent-encodes the path: a '#' or '?' in a folder name would
         # otherwise end the file name and open (or create) another file
-        con = sqlite3.connect(f"{p.resolve().as_uri()}?mode=ro", uri=True, timeout=5.0,
-                              check_same_thread=False)
+        # Read-write without create, used only to read: after a crash of the daemon, the
+        # last commits are in the write-ahead log, and only a connection that may write
+        # can recover its index; a read-only one reads the database without them (a
+        # pass log audited after a kill missed its last pass that way). A reader without
+        # write permission still opens read-only.
+        uri = p.resolve().as_uri()
+        try:
+            con = sqlite3.connect(f"{uri}?mode=rw", uri=True, timeout=5.0,
+                                  check_same_thread=False)
+            con.execute("PRAGMA query_only = 1")
+            con.execute("SELECT count(*) FROM sqlite_master").fetchone()
+        except sqlite3.OperationalError:
+            con = sqlite3.connect(f"{uri}?mode=ro", uri=True, timeout=5.0,
+                                  check_same_thread=False)
         con.execute("PRAGMA busy_timeout = 5000")
         return con
     if not p.parent.exists():
@@ -222,3 +234,54 @@ def read_passes(path: str | Path, since_unix: float | None = None,
         d["truck_closed"] = closed is not None
         out.append(d)
     return out
+
+
+@dataclass
+class Audit:
+    """What ``audit_log`` found: a pass log is sound when ``problems`` is empty."""
+
+    passes: list[int] = field(default_factory=list)
+    open_truck: int | None = None
+    open_truck_passes: list[int] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)
+
+
+def audit_log(path: str | Path) -> Audit:
+    """Check a pass log as a crash could have left it: SQLite's integrity check, pass
+    numbers 1..n with no gap, truck numbers with no gap, at most one open truck (the
+    newest), each pass complete (a valid one has its payload, an invalid one none)."""
+    a = Audit()
+    con = connect(path, readonly=True)
+    try:
+        ok = con.execute("PRAGMA integrity_check").fetchone()[0]
+        if ok != "ok":
+            a.problems.append(f"integrity_check: {ok}")
+        tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master")}
+        if "passes" not in tables:
+            # killed after the file was created, before the schema was committed: nothing
+            # had been written, and a restart creates the schema
+            if "trucks" in tables:
+                a.problems.append("a trucks table without a passes table")
+            return a
+        a.passes = [r[0] for r in con.execute("SELECT pass FROM passes ORDER BY pass")]
+        if a.passes != list(range(1, len(a.passes) + 1)):
+            a.problems.append(f"pass numbers are not 1..{len(a.passes)}")
+        for n, truck, kg, std, valid, samples in con.execute(
+                "SELECT pass, truck, payload_kg, std_kg, valid, samples FROM passes"):
+            if truck < 1 or samples <= 0 or (
+                    (kg is None or std is None) if valid else kg is not None):
+                a.problems.append(f"pass {n} is incomplete")
+        trucks = con.execute("SELECT truck, closed_unix FROM trucks ORDER BY truck").fetchall()
+        numbers = [t for t, _ in trucks]
+        if numbers and numbers != list(range(numbers[0], numbers[0] + len(numbers))):
+            a.problems.append(f"truck numbers have a gap: {numbers}")
+        open_ = [t for t, closed in trucks if closed is None]
+        if len(open_) > 1 or (open_ and open_[0] != numbers[-1]):
+            a.problems.append(f"open trucks {open_} (at most the newest may be open)")
+        a.open_truck = open_[-1] if open_ else None
+        if a.open_truck is not None:
+            a.open_truck_passes = [r[0] for r in con.execute(
+                "SELECT pass FROM passes WHERE truck = ? ORDER BY pass", (a.open_truck,))]
+    finally:
+        con.close()
+    return a

@@ -17,7 +17,7 @@ import sys
 import time
 from pathlib import Path
 
-from shoveld.daemon.persist import PassLog, db_path
+from shoveld.daemon.persist import PassLog, audit_log, db_path
 
 from .conftest import CAPTURE, PARAMS, free_port
 
@@ -27,32 +27,9 @@ WRITER_KILLS = 20
 
 def check_log(state: Path) -> tuple[list[int], int | None, list[int]]:
     """Integrity, contiguous unique pass ids; return (ids, open truck, its passes)."""
-    con = sqlite3.connect(db_path(state))
-    try:
-        assert con.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
-        tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master")}
-        if "passes" not in tables:
-            # Killed after the file was created but before the schema was committed: an
-            # empty database is consistent (nothing had been written), and a restart
-            # creates the schema.
-            assert "trucks" not in tables
-            return [], None, []
-        ids = [r[0] for r in con.execute("SELECT pass FROM passes ORDER BY pass")]
-        assert ids == list(range(1, len(ids) + 1)), ids
-        rows = con.execute("SELECT pass, truck, payload_kg, std_kg, valid, samples "
-                           "FROM passes").fetchall()
-        for _p, truck, kg, std, valid, samples in rows:
-            assert truck >= 1 and samples > 0
-            assert (kg is not None and std is not None) if valid else kg is None
-        trucks = con.execute("SELECT truck, closed_unix FROM trucks ORDER BY truck").fetchall()
-        open_ = [t for t, closed in trucks if closed is None]
-        assert len(open_) <= 1 and (not open_ or open_[0] == trucks[-1][0])
-        cur = open_[0] if open_ else None
-        cur_passes = [r[0] for r in con.execute(
-            "SELECT pass FROM passes WHERE truck = ? ORDER BY pass", (cur,))] if cur else []
-    finally:
-        con.close()
-    return ids, cur, cur_passes
+    a = audit_log(db_path(state))
+    assert not a.problems, a.problems
+    return a.passes, a.open_truck, a.open_truck_passes
 
 
 def test_daemon_killed_repeatedly_keeps_every_pass(tmp_path: Path) -> None:
