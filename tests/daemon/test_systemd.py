@@ -60,3 +60,38 @@ def test_unit_essentials() -> None:
         assert line in text
     sysusers = (ROOT / "systemd" / "shoveld.sysusers").read_text()
     assert "u shoveld" in sysusers and "m shoveld dialout" in sysusers
+
+
+def test_install_script_stages_the_tree_and_removes_it(tmp_path: Path) -> None:
+    """``scripts/install.sh --prefix`` (a staging root: no user, no systemctl)."""
+    import os
+    import stat
+    import subprocess
+
+    script = ROOT / "scripts" / "install.sh"
+    root = tmp_path / "root"
+    r = subprocess.run([str(script), "--prefix", str(root), "--no-deps"], capture_output=True,
+                       text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    assert os.readlink(root / "usr/bin/shoveld") == "/opt/shoveld/venv/bin/shoveld"
+    assert (root / "opt/shoveld/venv/bin/shoveld").exists()
+    unit = (root / "etc/systemd/system/shoveld.service").read_text()
+    docs = [d.removeprefix("file:") for line in unit.splitlines()
+            if line.startswith("Documentation=") for d in line.split("=", 1)[1].split()]
+    assert docs and all((root / d.lstrip("/")).is_file() for d in docs), docs
+    assert (root / "usr/lib/sysusers.d/shoveld.conf").is_file()
+    assert stat.S_IMODE((root / "var/lib/shoveld").stat().st_mode) == 0o750
+    cfg = root / "etc/shoveld/shoveld.toml"
+    cfg.write_text(cfg.read_text() + "\n# site edits\n")
+    r = subprocess.run([str(script), "--prefix", str(root), "--no-deps"], capture_output=True,
+                       text=True, timeout=600)
+    assert r.returncode == 0 and "kept the existing" in r.stdout
+    assert cfg.read_text().endswith("# site edits\n")  # a re-install keeps the site's config
+    r = subprocess.run([str(script), "--prefix", str(root), "--uninstall"],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0 and not (root / "opt/shoveld").exists()
+    assert not (root / "usr/bin/shoveld").is_symlink() and cfg.exists()
+    assert (root / "var/lib/shoveld").is_dir()  # the pass log stays unless --purge
+    r = subprocess.run([str(script), "--prefix", str(root), "--uninstall", "--purge"],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0 and not cfg.exists() and not (root / "var/lib/shoveld").exists()
