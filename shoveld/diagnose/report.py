@@ -202,7 +202,10 @@ def _plot_overview(d: Diagnosis, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     keys = [k for k in VARIABLES if k != "payload_x_direction"]
-    fig, axes = plt.subplots(2, (len(keys) + 1) // 2, figsize=(15, 6))
+    # Three panels a row, each large enough to read its labels on a laptop or on paper.
+    cols = 3
+    rows = (len(keys) + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(15, 3.6 * rows), squeeze=False)
     for ax, key in zip(axes.flat, keys, strict=False):
         label, unit = VARIABLES[key]
         for chan, col in (("hoist_a", "C3"), ("crowd_a", "C2")):
@@ -210,13 +213,14 @@ def _plot_overview(d: Diagnosis, path: Path) -> None:
             ax.errorbar(b["centres"], b["mean"], yerr=b["se"], fmt=".-", color=col,
                         label=f"{chan[:5]} ({100 * b['explained']:.0f} %)")
         ax.axhline(0, color="k", lw=0.5)
-        ax.set_xlabel(f"{label} ({unit})", fontsize=7)
-        ax.tick_params(labelsize=7)
-        ax.legend(fontsize=6)
+        ax.set_xlabel(f"{label} ({unit})", fontsize=12)
+        ax.set_ylabel("residual (A)", fontsize=12)
+        ax.tick_params(labelsize=11)
+        ax.legend(fontsize=10)
     for ax in list(axes.flat)[len(keys):]:
         ax.axis("off")
     fig.suptitle("Base model: residual current (A, bin means; % = variance explained) "
-                 "against each candidate variable", fontsize=10)
+                 "against each candidate variable", fontsize=14)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)

@@ -168,7 +168,7 @@ class HoistFieldWeakening(ExtensionTerm):
 
     name = "hoist_field_weakening"
     params = ("K_Hf1",)
-    units = ("N/A",)
+    units = ("N per A",)
     description = "hoist force per ampere changing with the hoist field current"
     cause = ("the hoist motors' pull per ampere changes with the hoist field current "
              "(field forcing or weakening, magnetic saturation of the field)")
@@ -558,7 +558,7 @@ class CurrentSaturation(ExtensionTerm):
 
     name = "current_saturation"
     params = ("K_H3", "K_C3")
-    units = ("N/A", "N/A")
+    units = ("N per A", "N per A")
     description = "hoist force falling behind the current at high current"
     cause = ("at high current the hoist motors give less pull per ampere "
              "(armature reaction, magnetic saturation)")
@@ -608,7 +608,7 @@ class GroundSlope(ExtensionTerm):
 
     name = "ground_slope"
     params = ("K_H_pitch",)
-    units = ("N/A",)
+    units = ("N per A",)
     description = "machine standing on a slope"
     cause = ("the machine stands on a slope: as it swings, the tilt changes the direction "
              "of gravity against the boom and the arm")
@@ -653,7 +653,7 @@ class BoomSuspensionSpring(ExtensionTerm):
 
     name = "boom_suspension_spring"
     params = ("K_H_sag",)
-    units = ("N/A",)
+    units = ("N per A",)
     description = "boom point dropping under rope load"
     cause = ("the boom suspension ropes stretch under the hoist pull, so the boom point "
              "(and the rope angle) moves with the load")

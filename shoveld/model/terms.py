@@ -181,7 +181,7 @@ class HoistDrive(Term):
 
     name = "hoist_drive"
     params = ("K_H",)
-    units = ("N/A",)
+    units = ("N per A",)
     description = "hoist motors' pull on the rope per ampere, over the hoist field current"
     base = True
 
@@ -192,7 +192,7 @@ class HoistDrive(Term):
         self.knots = knots
         self.nominal_index = knots.index(nominal)
         self.params = tuple("K_H" if k == nominal else f"K_H_f{k:g}" for k in knots)
-        self.units = tuple("N/A" for _ in knots)
+        self.units = tuple("N per A" for _ in knots)
         self.uses_field_current = len(knots) > 1
         """Terms with this flag model the field: no sample is excluded for a weak field."""
 
@@ -223,7 +223,7 @@ class CrowdDrive(Term):
 
     name = "crowd_drive"
     params = ("K_C",)
-    units = ("N/A",)
+    units = ("N per A",)
     description = "crowd motor's push on the handle per ampere"
     base = True
 
