@@ -31,6 +31,21 @@ def _version() -> str:
         return "(not installed)"
 
 
+class _Help(argparse.HelpFormatter):
+    """``--help`` shows each option's default, where it has one worth saying and its
+    text does not say it already."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        text = action.help or ""
+        d = action.default
+        if (action.option_strings and d is not None and d is not False and d != []
+                and d is not argparse.SUPPRESS
+                and "default" not in text and "%(default)" not in text
+                and not isinstance(action, argparse._VersionAction)):
+            text += " (default: %(default)s)"
+        return text
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="shoveld",
@@ -38,6 +53,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-v", "--verbose", action="count", default=0, help="more log output")
     p.add_argument("--version", action="version", version=f"shoveld {_version()}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    add = sub.add_parser
+
+    def add_parser(name: str, **kw: object) -> argparse.ArgumentParser:
+        kw.setdefault("formatter_class", _Help)
+        return add(name, **kw)  # type: ignore[arg-type]
+    sub.add_parser = add_parser  # type: ignore[method-assign]
     for name in SUBCOMMANDS:
         try:
             mod = importlib.import_module(f"shoveld.cli.{name}")

@@ -37,7 +37,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--effect", action="append", default=[], metavar="NAME[=MAGNITUDE]",
                    help="switch on a hidden physical effect (repeatable); see --list-effects")
     p.add_argument("--list-effects", action="store_true", help="list the effects and exit")
-    p.add_argument("--out", help="output signals table (.csv)")
+    p.add_argument("--out", metavar="FILE",
+                   help="output signals table (.csv); required (but with --list-effects)")
     p.set_defaults(func=run)
 
 

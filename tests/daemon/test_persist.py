@@ -172,3 +172,13 @@ def test_version(capsys) -> None:
     with pytest.raises(SystemExit) as e:
         main(["--version"])
     assert e.value.code == 0 and capsys.readouterr().out.startswith("shoveld 0.")
+
+
+def test_help_shows_defaults(capsys) -> None:
+    from shoveld.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["sim", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    assert "passes to dig (cycles) (default: 12)" in out and "(default: None)" not in out
+    assert "--out FILE" in out and "required" in out
