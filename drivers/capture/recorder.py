@@ -67,6 +67,9 @@ def load_record_config(path: str | Path) -> dict[str, Any]:
         data = tomllib.loads(p.read_text(encoding="utf-8"))
     except OSError as e:
         raise RecordConfigError(f"{p}: cannot read: {e.strerror}") from None
+    except UnicodeDecodeError as e:
+        raise RecordConfigError(f"{p}: not a text file (byte {e.start} is not UTF-8); "
+                                "expected a TOML configuration") from None
     except tomllib.TOMLDecodeError as e:
         raise RecordConfigError(f"{p}: not valid TOML: {e}") from None
     check_record_config(data, str(p))

@@ -1,0 +1,197 @@
+"""Every command with bad input: does it answer one line naming what is wrong, with no
+traceback?
+
+A matrix of commands and cases (configs with a wrong type, an unknown key, a missing
+port, a malformed endpoint, not UTF-8; params files with nan, not TOML, a key missing;
+signals tables truncated, garbled, with a cell too long; capture folders with a file
+missing or a garbled manifest; bad options and missing files). Each case runs through
+``shoveld.cli.main`` in this process with stderr captured. It counts a traceback (an
+exception out of ``main``), an exit code of 0, and an error that is not one line.
+
+    .venv/bin/python bench/bad_input.py [--verbose]
+
+Goal (issue 12): 0 tracebacks; every case exits non-zero with one line.
+``tests/cli_bad_input/test_bad_input.py`` runs the same matrix.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import shutil
+import tempfile
+import traceback
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+CAPTURE = ROOT / "hil_fixtures" / "captures" / "daemon-e2e"
+PARAMS = CAPTURE / "params.toml"
+
+
+@dataclass
+class Outcome:
+    command: str
+    case: str
+    code: int | None
+    stderr: str
+    traceback: str
+
+    @property
+    def ok(self) -> bool:
+        lines = [x for x in self.stderr.splitlines() if x.strip()]
+        return not self.traceback and self.code not in (0, None) and len(lines) == 1
+
+
+def files(d: Path) -> dict[str, Path]:
+    """The bad inputs, written into ``d``."""
+    from shoveld.signals.columns import COLUMN_NAMES
+
+    good_cfg = (f'[shovel]\nid = "x"\nparams = "{PARAMS}"\nstate_dir = "{d}/state"\n'
+                '[devices.laser]\nkind = "ar4000"\nport = "/dev/ttyUSB9"\n')
+    hdr = "# format: shovel-signals/1\n# sample_rate_hz: 50\n" + ",".join(COLUMN_NAMES) + "\n"
+    row = ",".join(["0"] + ["1"] * (len(COLUMN_NAMES) - 1))
+    params = PARAMS.read_text()
+    out = {
+        "cfg-wrong-type": good_cfg.replace('id = "x"', "id = 7"),
+        "cfg-unknown-key": good_cfg + "[loop]\nrate = 100\n",
+        "cfg-missing-port": good_cfg.replace('port = "/dev/ttyUSB9"\n', ""),
+        "cfg-bad-endpoint": good_cfg + '[zenoh]\nlisten = ["tcp/127.0.0.1"]\n',
+        "cfg-not-toml": "[shovel\nid = x\n",
+        "params-nan": params.replace("value = ", "value = nan #", 1),
+        "params-not-toml": "[params\n",
+        "params-missing-key": params.replace("[noise]", "[noise_]", 1),
+        "table-truncated": hdr + row + "\n" + row[: len(row) // 2] + "\n",
+        "table-garbled": hdr + row + "\n" + row.replace("1", "x", 3) + "\n",
+        "table-long-cell": hdr + "9" * 200_000 + "\n",
+        "table-no-header": "# format: shovel-signals/1\n",
+        "mti-garbage": "this is not an Xbus stream",
+    }
+    paths = {}
+    for name, text in out.items():
+        p = d / (name + (".toml" if name.startswith(("cfg", "params")) else ".csv"))
+        p.write_text(text)
+        paths[name] = p
+    for name in ("cfg-not-utf8", "params-not-utf8", "table-not-utf8"):
+        p = d / (name + (".csv" if name.startswith("table") else ".toml"))
+        p.write_bytes(b"[shovel]\nid = \"\xff\xfe\"\n")
+        paths[name] = p
+    cap = d / "cap-missing-file"
+    shutil.copytree(CAPTURE, cap)
+    (cap / "laser.serial.jsonl").unlink()
+    paths["cap-missing-file"] = cap
+    cap = d / "cap-bad-manifest"
+    shutil.copytree(CAPTURE, cap)
+    (cap / "manifest.json").write_text("{not json")
+    paths["cap-bad-manifest"] = cap
+    (d / "not-a-db.sqlite").write_text("not sqlite")
+    paths["not-a-db"] = d / "not-a-db.sqlite"
+    paths["missing"] = d / "no-such-file"
+    paths["nodir"] = d / "no" / "such" / "folder" / "out"
+    return paths
+
+
+def cases(f: dict[str, Path]) -> list[tuple[str, str, list[str]]]:
+    """(command, case, argv)."""
+    s = str
+    out: list[tuple[str, str, list[str]]] = []
+    cfgs = [k for k in f if k.startswith("cfg")] + ["missing"]
+    for k in cfgs:
+        out.append(("check-config", k, ["check-config", s(f[k])]))
+        out.append(("run", k, ["run", "--config", s(f[k]), "--duration", "0.1"]))
+        if k not in ("cfg-wrong-type", "cfg-unknown-key", "cfg-bad-endpoint"):
+            # (the recorder reads only [devices] and [installation])
+            out.append(("record", k, ["record", "--config", s(f[k]), "--out",
+                                      s(f["nodir"]), "--duration", "0.1"]))
+        out.append(("passes", k, ["passes", "--config", s(f[k])]))
+        out.append(("replay", k, ["replay", s(CAPTURE), "--fast", "--config", s(f[k])]))
+    tables = [k for k in f if k.startswith("table")] + ["missing"]
+    for k in tables:
+        out.append(("calibrate", k, ["calibrate", "--out", s(f["nodir"].parent / "p.toml"),
+                                     s(f[k])]))
+        out.append(("estimate", k, ["estimate", "--params", s(PARAMS), s(f[k])]))
+        out.append(("diagnose", k, ["diagnose", "--calib", s(f[k]), "--measured", s(f[k])]))
+    for k in [k for k in f if k.startswith("params")] + ["missing"]:
+        out.append(("estimate", k, ["estimate", "--params", s(f[k]), s(f["table-garbled"])]))
+        out.append(("replay", k, ["replay", s(CAPTURE), "--fast", "--params", s(f[k])]))
+    for k in ("cap-missing-file", "cap-bad-manifest", "missing"):
+        out.append(("replay", k, ["replay", s(f[k]), "--fast", "--params", s(PARAMS)]))
+    out += [
+        ("replay", "speed-0", ["replay", s(CAPTURE), "--speed", "0"]),
+        ("replay", "listen-malformed", ["replay", s(CAPTURE), "--fast", "--listen", "tcp/x"]),
+        ("sim", "out-in-missing-folder", ["sim", "--passes", "1", "--out", s(f["nodir"])]),
+        ("sim", "unknown-effect", ["sim", "--effect", "no_such_effect", "--out", s(f["nodir"])]),
+        ("sim", "bad-magnitude", ["sim", "--effect", "ground_slope=steep", "--out", "x.csv"]),
+        ("sim", "no-out", ["sim"]),
+        ("calibrate", "out-in-missing-folder", ["calibrate", "--out", s(f["nodir"]),
+                                                 s(f["table-garbled"])]),
+        ("decode", "missing", ["decode", "mti", s(f["missing"])]),
+        ("passes", "not-a-db", ["passes", "--db", s(f["not-a-db"])]),
+        ("passes", "since-garbled", ["passes", "--db", s(f["not-a-db"]), "--since", "soonish"]),
+        ("passes", "missing-db", ["passes", "--db", s(f["missing"])]),
+        ("report", "not-a-db", ["report", "--db", s(f["not-a-db"]), "--out", s(f["nodir"])]),
+        ("report", "since-garbled", ["report", "--db", s(f["not-a-db"]), "--since", "x",
+                                     "--out", s(f["nodir"])]),
+        ("cab", "tls-missing", ["cab", "--tls", s(f["missing"]), s(f["missing"]),
+                                s(f["missing"]), "--duration", "0.1"]),
+        ("cab", "connect-malformed", ["cab", "--connect", "tcp127.0.0.1:7447"]),
+        ("cab", "listen-malformed", ["cab", "--web", "--listen", "nohost"]),
+        ("office", "listen-malformed", ["office", "--listen", "127.0.0.1:http"]),
+        ("pki", "issue-without-ca", ["pki", "issue", "cab-1", "--role", "cab", "--dir",
+                                     s(f["nodir"])]),
+        ("pki", "bad-role", ["pki", "issue", "x", "--role", "boss", "--dir", s(f["nodir"])]),
+        ("diagnose", "unknown-term", ["diagnose", "--calib", s(f["table-garbled"]),
+                                      "--measured", s(f["table-garbled"]), "--library", "x"]),
+    ]
+    return out
+
+
+def run_case(command: str, case: str, argv: list[str]) -> Outcome:
+    from shoveld.cli import main
+
+    err, out = io.StringIO(), io.StringIO()
+    tb = ""
+    code: int | None = None
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):
+        try:
+            code = main(argv)
+        except SystemExit as e:
+            code = e.code if isinstance(e.code, int) else (0 if e.code is None else 2)
+        except BaseException:  # noqa: BLE001 - a traceback is what is counted
+            tb = traceback.format_exc()
+    text = err.getvalue()
+    # argparse's usage lines come before its one error line: the error is the last line
+    if text.startswith("usage:"):
+        text = text.splitlines()[-1]
+    return Outcome(command, case, code, text, tb)
+
+
+def run_matrix() -> list[Outcome]:
+    import logging
+
+    logging.disable(logging.CRITICAL)
+    with tempfile.TemporaryDirectory() as tmp:
+        f = files(Path(tmp))
+        return [run_case(c, k, argv) for c, k, argv in cases(f)]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--verbose", action="store_true")
+    args = ap.parse_args()
+    res = run_matrix()
+    bad = [r for r in res if not r.ok]
+    tbs = [r for r in res if r.traceback]
+    commands = sorted({r.command for r in res})
+    print(f"{len(res)} cases over {len(commands)} commands: {len(tbs)} tracebacks, "
+          f"{sum(1 for r in res if r.code == 0)} exited 0, "
+          f"{sum(1 for r in bad if not r.traceback and r.code != 0)} not one line")
+    for r in bad if not args.verbose else res:
+        why = (r.traceback.strip().splitlines()[-1] if r.traceback else
+               f"exit {r.code}: {r.stderr.strip()[:160]!r}")
+        print(f"  {'ok ' if r.ok else 'BAD'} {r.command} {r.case}: {why}")
+
+
+if __name__ == "__main__":
+    main()
