@@ -97,3 +97,42 @@ def test_a_cell_too_long_for_csv_is_a_format_error_with_its_line() -> None:
     text = "# format: shovel-signals/1\n" + ",".join(COLUMN_NAMES) + "\n" + "9" * 200_000 + "\n"
     with pytest.raises(SignalsFormatError, match=r"t\.csv:3: not a CSV row"):
         read_table("t.csv", text)
+
+
+def test_the_numpy_path_and_the_cell_by_cell_path_read_the_same_table(tmp_path: Path,
+                                                                      monkeypatch) -> None:
+    import shoveld.signals.table as T
+    from shoveld.sim.scenario import simulate_cycles
+
+    tab = simulate_cycles(2, seed=3, verified_fraction=1.0).table
+    tab.columns["boom_deg"][5:9] = np.nan  # blanks, at the start and inside rows
+    tab.columns["time_s"][:] = tab.columns["time_s"] + 0.0
+    path = tmp_path / "t.csv"
+    T.write_table(path, tab)
+    monkeypatch.setattr(T, "CHUNK_ROWS", 1000)  # several chunks, both sides of a join
+    fast = T.read_table(path)
+    monkeypatch.setattr(T, "_fast_chunk", lambda chunk, prev: (None, prev))
+    slow = T.read_table(path)
+    for name in fast.columns:
+        assert np.array_equal(fast.columns[name], slow.columns[name], equal_nan=True), name
+    assert np.isnan(fast.columns["boom_deg"][5:9]).all()
+
+
+@pytest.mark.parametrize("bad,what", [("nan", "not a finite number"),
+                                      ("1#2", "expected a number"),
+                                      ("inf", "not a finite number")])
+def test_what_numpy_would_take_is_still_refused(tmp_path: Path, bad: str, what: str) -> None:
+    from shoveld.signals.columns import COLUMN_NAMES
+    from shoveld.signals.table import SignalsFormatError, read_table, write_table
+    from shoveld.sim.scenario import simulate_cycles
+
+    tab = simulate_cycles(1, seed=3).table
+    path = tmp_path / "t.csv"
+    write_table(path, tab.slice(tab.time < 1.0))
+    lines = path.read_text().splitlines()
+    k = next(i for i, ln in enumerate(lines) if ln.startswith("time_s")) + 3
+    cells = lines[k].split(",")
+    cells[COLUMN_NAMES.index("hoist1_a")] = bad
+    lines[k] = ",".join(cells)
+    with pytest.raises(SignalsFormatError, match=rf"t\.csv:{k + 1} column 'hoist1_a'.*{what}"):
+        read_table("t.csv", "\n".join(lines) + "\n")
