@@ -146,13 +146,51 @@ def _spline_basis(knots: tuple[float, ...]) -> Any:
     """The natural cubic spline through each unit vector of knot values (cached)."""
     sp = _SPLINES.get(knots)
     if sp is None:
-        from scipy.interpolate import CubicSpline
-
-        n = len(knots)
-        sp = CubicSpline(np.asarray(knots), np.eye(n), bc_type="natural" if n > 2 else
-                         "not-a-knot") if n > 2 else _Linear(knots)
+        sp = _NaturalSpline(knots) if len(knots) > 2 else _Linear(knots)
         _SPLINES[knots] = sp
     return sp
+
+
+class _NaturalSpline:
+    """The natural cubic spline basis on numpy: row k of ``self(x)`` holds the weights of
+    the knot values at x[k]. scipy's ``CubicSpline(bc_type="natural")`` gives the same
+    (``tests/engine/test_filters.py``); importing scipy.interpolate in the live daemon
+    cost its loop 0.9 s at the first pass (py-spy, ``bench/daemon_live.py --profile``)."""
+
+    def __init__(self, knots: tuple[float, ...]) -> None:
+        x = np.asarray(knots, dtype=float)
+        n = len(x)
+        h = np.diff(x)
+        # Second derivatives m = M y, natural ends (m_0 = m_{n-1} = 0): the tridiagonal
+        # system h_{i-1} m_{i-1} + 2 (h_{i-1} + h_i) m_i + h_i m_{i+1} = 6 (slope diff).
+        a = np.zeros((n - 2, n - 2))
+        rhs = np.zeros((n - 2, n))
+        for i in range(1, n - 1):
+            r = i - 1
+            a[r, r] = 2.0 * (h[i - 1] + h[i])
+            if r > 0:
+                a[r, r - 1] = h[i - 1]
+            if r < n - 3:
+                a[r, r + 1] = h[i]
+            rhs[r, i - 1] += 6.0 / h[i - 1]
+            rhs[r, i] -= 6.0 / h[i - 1] + 6.0 / h[i]
+            rhs[r, i + 1] += 6.0 / h[i]
+        self.m = np.zeros((n, n))
+        self.m[1:-1] = np.linalg.solve(a, rhs)
+        self.x, self.h = x, h
+
+    def __call__(self, xs: np.ndarray) -> np.ndarray:
+        x, h, m = self.x, self.h, self.m
+        i = np.clip(np.searchsorted(x, xs, side="right") - 1, 0, len(x) - 2)
+        hi = h[i]
+        a = (x[i + 1] - xs) / hi
+        b = 1.0 - a
+        out = ((a ** 3 - a) * hi * hi / 6.0)[:, None] * m[i] + \
+            ((b ** 3 - b) * hi * hi / 6.0)[:, None] * m[i + 1]
+        rows = np.arange(len(xs))
+        out[rows, i] += a
+        out[rows, i + 1] += b
+        return out
 
 
 class _Linear:

@@ -138,8 +138,23 @@ def test_payload_rls_matches_filterpy(forgetting: float) -> None:
 
 
 def test_the_daemon_and_the_engine_start_without_scipy_or_filterpy() -> None:
-    code = ("import sys, shoveld.daemon.service, shoveld.engine.loop, shoveld.engine.offline;"
+    code = ("import sys, numpy as np, shoveld.daemon.service, shoveld.engine.loop, "
+            "shoveld.engine.offline;"
+            "from shoveld.model.terms import field_basis;"
+            "field_basis(np.linspace(30, 70, 9), (30.0, 40.0, 50.0, 60.0, 70.0));"
             "print(sorted({m.split('.')[0] for m in sys.modules} & {'scipy', 'filterpy'}))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.strip()
     assert out == "[]"
+
+
+@pytest.mark.parametrize("knots", [(30.0, 40.0, 50.0), (30.0, 40.0, 50.0, 60.0, 70.0),
+                                   (25.0, 31.0, 47.0, 52.0, 70.0, 71.5)])
+def test_field_spline_is_scipys_natural_cubic_spline(knots: tuple[float, ...]) -> None:
+    from scipy.interpolate import CubicSpline
+
+    from shoveld.model.terms import _NaturalSpline
+
+    x = np.linspace(knots[0], knots[-1], 301)
+    ref = CubicSpline(np.asarray(knots), np.eye(len(knots)), bc_type="natural")(x)
+    assert np.allclose(_NaturalSpline(knots)(x), ref, rtol=1e-10, atol=1e-12)
