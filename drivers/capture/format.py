@@ -160,6 +160,10 @@ def _json_line(path: Path, lineno: int, text: str) -> dict[str, Any]:
     except json.JSONDecodeError as e:
         raise CaptureFormatError(path, lineno, f"not valid JSON ({e.msg} at column {e.colno})"
                                  ) from None
+    except RecursionError:
+        raise CaptureFormatError(path, lineno, "not valid JSON (nested too deeply)") from None
+    except ValueError as e:  # e.g. an integer of more than 4300 digits
+        raise CaptureFormatError(path, lineno, f"not valid JSON ({e})") from None
     if not isinstance(obj, dict):
         raise CaptureFormatError(path, lineno, "expected a JSON object")
     return obj

@@ -61,6 +61,11 @@ _QUANTITIES = {
 }
 
 
+_SIZES = {"euler_angles": 6, "rate_of_turn": 6, "acceleration": 6, "quaternion": 8,
+          "sample_time": 4, "status_word": 4, "group_counter": 2, "error": 1}
+"""Data bytes of each MTi CAN message (int16 triples/quads, u32, u16, one byte)."""
+
+
 @dataclass(frozen=True)
 class MtiCanLayout:
     """CAN ids, scalings and byte order of the MTi CAN output (defaults: MTi-600)."""
@@ -126,8 +131,8 @@ class MtiCanCodec:
     def decode(self, arbitration_id: int, data: bytes) -> tuple[str, tuple[float, ...]] | None:
         """(kind, values) of one frame; None for a foreign id or a too-short payload."""
         kind = self._kind_of.get(arbitration_id)
-        if kind is None:
-            return None
+        if kind is None or len(data) != _SIZES.get(kind, len(data)):
+            return None  # a frame of the wrong length is not this message
         try:
             if kind in ("euler_angles", "rate_of_turn", "acceleration"):
                 sc = self._scale[kind]

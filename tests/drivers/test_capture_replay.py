@@ -325,3 +325,14 @@ def test_a_capture_torn_by_a_power_cut_replays_up_to_the_tear(tmp_path: Path) ->
                        capture_output=True, text=True, timeout=120)
     assert r.returncode != 0 and "laser.serial.jsonl:4" in r.stderr
     assert "Traceback" not in r.stderr
+
+
+def test_a_record_python_cannot_hold_is_a_format_error(tmp_path: Path) -> None:
+    from drivers.capture.format import CaptureFormatError, read_serial_chunks
+
+    src = Path(__file__).resolve().parents[2] / "hil_fixtures" / "captures" / "daemon-e2e"
+    lines = (src / "laser.serial.jsonl").read_text().splitlines(keepends=True)
+    f = tmp_path / "laser.serial.jsonl"
+    f.write_text(lines[0] + '{"t": ' + "9" * 5000 + ', "d": "rx", "hex": ""}\n')
+    with pytest.raises(CaptureFormatError, match=r"laser.serial.jsonl:2: not valid JSON"):
+        list(read_serial_chunks(f))

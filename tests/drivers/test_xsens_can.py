@@ -174,3 +174,14 @@ def test_open_waits_for_the_device() -> None:
     with pytest.raises(DeviceError, match="no MTi frames on CAN virtual:.* within 0.1 s"):
         drv.open()
     drv.close()
+
+
+@pytest.mark.parametrize("kind", ["euler_angles", "quaternion", "sample_time", "group_counter"])
+def test_a_frame_of_the_wrong_length_is_not_its_message(kind: str) -> None:
+    codec = MtiCanCodec(MtiCanLayout())
+    values = (1.0, 2.0, 3.0, 0.5) if kind == "quaternion" else (
+        (1.0, 2.0, 3.0) if kind == "euler_angles" else (7.0,))
+    msg = codec.encode(kind, values[0] if len(values) == 1 else values)
+    assert codec.decode(msg.arbitration_id, bytes(msg.data)) is not None
+    assert codec.decode(msg.arbitration_id, bytes(msg.data) + b"\x00") is None
+    assert codec.decode(msg.arbitration_id, bytes(msg.data)[:-1]) is None
