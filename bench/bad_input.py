@@ -59,6 +59,9 @@ def files(d: Path) -> dict[str, Path]:
         "cfg-missing-port": good_cfg.replace('port = "/dev/ttyUSB9"\n', ""),
         "cfg-bad-endpoint": good_cfg + '[zenoh]\nlisten = ["tcp/127.0.0.1"]\n',
         "cfg-not-toml": "[shovel\nid = x\n",
+        "cfg-channels-not-a-list": good_cfg + '[devices.adc]\nkind = "modbus_tcp"\n'
+                                              'host = "127.0.0.1"\nchannels = 7\n',
+        "cfg-port-a-list": good_cfg.replace('port = "/dev/ttyUSB9"', 'port = ["/dev/x"]'),
         "params-nan": params.replace("value = ", "value = nan #", 1),
         "params-not-toml": "[params\n",
         "params-missing-key": params.replace("[noise]", "[noise_]", 1),
@@ -100,7 +103,8 @@ def cases(f: dict[str, Path]) -> list[tuple[str, str, list[str]]]:
     for k in cfgs:
         out.append(("check-config", k, ["check-config", s(f[k])]))
         out.append(("run", k, ["run", "--config", s(f[k]), "--duration", "0.1"]))
-        if k not in ("cfg-wrong-type", "cfg-unknown-key", "cfg-bad-endpoint"):
+        if k not in ("cfg-wrong-type", "cfg-unknown-key", "cfg-bad-endpoint",
+                     "cfg-channels-not-a-list", "cfg-port-a-list"):
             # (the recorder reads only [devices] and [installation])
             out.append(("record", k, ["record", "--config", s(f[k]), "--out",
                                       s(f["nodir"]), "--duration", "0.1"]))

@@ -255,6 +255,8 @@ def device_signals(kind: str, driver: Mapping[str, Any]) -> tuple[str, ...]:
     if kind in LASER_KINDS:
         return ("crowd_m",)
     chans = driver.get("channels") or []
+    if not isinstance(chans, list):
+        return ()  # the driver's own check names the key
     return tuple(c["name"] for c in chans if isinstance(c, Mapping) and "name" in c)
 
 
@@ -312,7 +314,9 @@ def parse_devices(where: str, devs: Any, default_max_age: float,
         if check_drivers:
             try:
                 build_driver(dev)
-            except ValueError as e:
+            except (ValueError, TypeError, KeyError, AttributeError) as e:
+                # A driver's from_config given a key of the wrong type (channels = 7, a
+                # port as a list) fails with TypeError or KeyError, not only ValueError.
                 raise ConfigError(f"{where}: [devices.{name}]: {e}") from None
         for s in dev.signals:
             if s not in DEVICE_SIGNALS:
