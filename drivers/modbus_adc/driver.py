@@ -41,6 +41,7 @@ from drivers.base import DeviceError, Driver, Reading, Sink, TickHint, check_key
 from drivers.capture.clock import clock_wait_until
 from drivers.capture.format import RegisterRead
 from drivers.modbus_adc.channels import Channel, ChannelMap
+from drivers.modbus_adc.strict import strict_registers
 
 log = logging.getLogger(__name__)
 
@@ -337,11 +338,11 @@ class ModbusAdcDriver(Driver):
         if self.client_factory is not None:
             return self.client_factory(c)
         if c.transport == "tcp":
-            return ModbusTcpClient(c.host, port=int(c.port), timeout=c.timeout_s,
-                                   retries=c.retries)
-        return ModbusSerialClient(str(c.port), framer=FramerType.RTU, baudrate=c.baudrate,
-                                  parity=c.parity, stopbits=c.stopbits, bytesize=c.bytesize,
-                                  timeout=c.timeout_s, retries=c.retries)
+            return strict_registers(ModbusTcpClient(c.host, port=int(c.port),
+                                                    timeout=c.timeout_s, retries=c.retries))
+        return strict_registers(ModbusSerialClient(
+            str(c.port), framer=FramerType.RTU, baudrate=c.baudrate, parity=c.parity,
+            stopbits=c.stopbits, bytesize=c.bytesize, timeout=c.timeout_s, retries=c.retries))
 
     def open(self) -> None:
         self.close()

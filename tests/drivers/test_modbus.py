@@ -247,3 +247,19 @@ def test_an_answer_to_another_question_is_a_bad_frame(reply: str) -> None:
     assert r.values == {} and r.invalid == {c.name for c in CHANNELS}  # no value taken
     assert drv.health.bad_frames >= 1
     assert "another function code" in drv.health.extra["channels"]["hoist1_a"]["last_error"]
+
+
+def test_an_odd_byte_count_is_refused_by_the_drivers_decoder() -> None:
+    """pymodbus alone rounds an odd byte count down; the driver's client refuses it."""
+    from pymodbus.pdu import DecodePDU
+
+    from drivers.modbus_adc.strict import strict_registers
+
+    assert DecodePDU(False).decode(bytes([4, 3, 0, 1, 0])) is not None
+    assert strict_registers(DecodePDU(False)).decode(bytes([4, 3, 0, 1, 0])) is None
+    assert strict_registers(DecodePDU(False)).decode(bytes([3, 3, 0, 1, 0])) is None
+    assert strict_registers(DecodePDU(False)).decode(bytes([4, 2, 0, 1])).registers == [1]
+    client = ModbusAdcDriver("adc", ModbusAdcConfig.from_config(
+        {"kind": "modbus_tcp", "host": "127.0.0.1", "port": 1502,
+         "channels": CHANNELS.to_config()}))._make_client()
+    assert client.framer.decoder.decode(bytes([4, 3, 0, 1, 0])) is None  # the real client
