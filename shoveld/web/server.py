@@ -163,8 +163,8 @@ async def serve(state: ScreenState, host: str, port: int, started: Any = None,
     await runner.setup()
     site = web.TCPSite(runner, host, port)
     await site.start()
-    sockets = site._server.sockets if site._server else []  # type: ignore[union-attr]
-    bound = sockets[0].getsockname()[1] if sockets else port
+    addresses = runner.addresses  # (host, port, ...) of each bound socket
+    bound = int(addresses[0][1]) if addresses else port
     shown = f"[{host}]" if ":" in host else host
     if started is not None:
         started(f"http://{shown}:{bound}/")
