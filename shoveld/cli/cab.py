@@ -281,6 +281,11 @@ class CabState:
                     out.append(f"  last truck {c['truck']}: {c['total_kg']:.0f} kg "
                                f"({c['fill_pct']} %) {c['status']}")
                     r = c.get("rule_10_10_20") or {}
+                    sh = c.get("shift") or {}
+                    if sh.get("trucks"):
+                        out.append(f"  shift so far: {_n(sh['trucks'], 'truck', 'trucks')}, "
+                                   f"{_n(sh['passes'], 'pass', 'passes')}, "
+                                   f"{sh['kg'] / 1000:.1f} t")
                     if r.get("trucks"):
                         out.append(f"  shift: {r['trucks']} trucks, mean fill {r['mean_pct']} %, "
                                    f"{r['over_110_pct']} % over 110 %, {r['over_120']} over "

@@ -198,14 +198,14 @@ class PassLog:
                 c.execute("ROLLBACK")
             raise
 
-    def closed_truck_totals(self, since_unix: float) -> list[tuple[int, float, float]]:
-        """(truck, total of valid passes, target) of trucks closed since ``since_unix``."""
+    def closed_truck_totals(self, since_unix: float) -> list[tuple[int, float, float, int]]:
+        """(truck, total of valid passes, target, passes) of trucks closed since ``since_unix``."""
         rows = self.con.execute(
             "SELECT t.truck, coalesce(sum(CASE WHEN p.valid THEN p.payload_kg END), 0), "
-            "t.target_kg FROM trucks t LEFT JOIN passes p ON p.truck = t.truck "
+            "t.target_kg, count(p.pass) FROM trucks t LEFT JOIN passes p ON p.truck = t.truck "
             "WHERE t.closed_unix IS NOT NULL AND t.closed_unix >= ? GROUP BY t.truck "
             "ORDER BY t.truck", (since_unix,)).fetchall()
-        return [(int(a), float(b), float(c)) for a, b, c in rows]
+        return [(int(a), float(b), float(c), int(d)) for a, b, c, d in rows]
 
 
 PASS_COLUMNS = ("pass", "truck", "shovel", "start", "end", "payload_kg", "std_kg", "samples",

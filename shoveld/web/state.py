@@ -74,7 +74,8 @@ class ScreenState(CabState):
         """Monotonic time each shovel was last heard from."""
         self.recent: dict[str, list[float]] = {}
         self.shift: dict[str, dict[str, float]] = {}
-        """Per shovel, passes and tonnes of the trucks closed while this screen ran."""
+        """Per shovel, passes and tonnes of the trucks closed while this screen ran (used
+        when the daemon's truck messages carry no ``shift`` of their own)."""
         self.link = "connecting"
         """The Zenoh link: ``connecting`` (no session yet), ``up`` or ``down``."""
         self.link_detail = ""
@@ -139,6 +140,19 @@ class ScreenState(CabState):
             return {"time": time.time(), "link": self.link, "link_detail": self.link_detail,
                     "version": self.version, "shovels": shovels}
 
+    def _shift_closed(self, shovel: str, truck: dict[str, Any]) -> dict[str, float]:
+        """Closed trucks this shift: the daemon's count from its pass log when its truck
+        message carries one (true however late this screen started), else what was seen."""
+        seen = self.shift.get(shovel, {"trucks": 0, "passes": 0, "kg": 0.0})
+        ds = truck.get("shift")
+        if not isinstance(ds, dict):
+            return seen
+        try:
+            return {"trucks": int(ds["trucks"]), "passes": int(ds["passes"]),
+                    "kg": float(ds["kg"])}
+        except (KeyError, TypeError, ValueError):
+            return seen
+
     def _shovel(self, v: ShovelView, now: float) -> dict[str, Any]:
         heard = self.heard.get(v.shovel)
         age = None if heard is None else now - heard
@@ -156,7 +170,7 @@ class ScreenState(CabState):
                             f"daemon: not heard for {age or 0:.0f} s")
         if self.link != "up":
             problems.insert(0, f"link: {self.link} {self.link_detail}".strip())
-        shift = self.shift.get(v.shovel, {"trucks": 0, "passes": 0, "kg": 0.0})
+        shift = self._shift_closed(v.shovel, truck)
         is_open = bool(truck) and not truck.get("closed")
         return {
             "shovel": v.shovel, "alive": v.alive and not silent, "silent": silent,

@@ -64,8 +64,10 @@ def test_screen_warns_of_overload_and_words_the_shift_honestly() -> None:
             "compliant": True}
     state.on_message("s7", "truck", {"truck": 4, "passes": 1, "total_kg": 46000.0,
                                      "target_kg": 136000.0, "fill_pct": 33.8, "status": "under",
-                                     "closed": True, "rule_10_10_20": rule})
+                                     "closed": True, "rule_10_10_20": rule,
+                                     "shift": {"trucks": 6, "passes": 31, "kg": 277000.0}})
     screen = state.screen()
+    assert "shift so far: 6 trucks, 31 passes, 277.0 t" in screen
     assert "sent off, UNDER" in screen and "Left under-loaded" in screen
     assert "mean fill 34.0 %" in screen and "compliant" not in screen
     assert "truck 4: 1 pass," in screen  # not "1 passes"

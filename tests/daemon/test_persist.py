@@ -47,7 +47,7 @@ def test_closed_truck_starts_the_next_one(tmp_path: Path) -> None:
     log.close_truck(1, 62000.0, T0 + 5)
     r = log.restore()
     assert r.next_pass == 3 and r.truck == 2 and r.truck_passes == []
-    assert log.closed_truck_totals(T0) == [(1, 60000.0, 62000.0)]
+    assert log.closed_truck_totals(T0) == [(1, 60000.0, 62000.0, 2)]
     log.write_pass(p(3, 2), T0 + 30, T0 + 31, 62000.0)
     r = log.restore()
     assert r.truck == 2 and [x["pass"] for x in r.truck_passes] == [3]

@@ -66,6 +66,9 @@ def test_table_through_the_service_to_zenoh(tmp_path: Path, e2e_table: SignalsTa
     assert closed[0]["total_kg"] == pytest.approx(est.trucks[0].total_kg, rel=0.015)
     assert closed[0]["status"] == "ok" and closed[1]["status"] == "under"
     assert closed[1]["rule_10_10_20"]["trucks"] == 2
+    assert closed[1]["shift"]["trucks"] == 2 and closed[1]["shift"]["passes"] == 3
+    assert closed[1]["shift"]["kg"] == pytest.approx(
+        closed[0]["total_kg"] + closed[1]["total_kg"], abs=0.2)
     assert closed[1]["target_kg"] == 62000.0
     # every message is JSON with its encoding; the other topics carry their fields
     assert {enc for _, _, enc in col.samples} == {"application/json"}

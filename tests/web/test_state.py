@@ -58,3 +58,19 @@ def test_a_closed_truck_counts_once_in_the_shift() -> None:
     st.on_message("s1", "truck", {"truck": 2, "passes": 1, "total_kg": 30000.0,
                                   "target_kg": 136000.0, "status": "under"})
     assert st.snapshot()["shovels"][0]["shift"] == {"trucks": 2, "passes": 5, "kg": 160000.0}
+
+
+def test_the_shift_comes_from_the_daemons_pass_log_when_it_says_so() -> None:
+    """A screen started mid-shift shows the daemon's totals, not only the trucks it saw."""
+    st = ScreenState()
+    st.on_status("s1", {"shovel": "s1", "truck": {
+        "truck": 9, "passes": 2, "total_kg": 60000.0, "target_kg": 136000.0,
+        "status": "under", "shift": {"window_h": 12.0, "trucks": 8, "passes": 37,
+                                     "kg": 1_050_000.0}}})
+    assert st.snapshot()["shovels"][0]["shift"] == {"trucks": 9, "passes": 39,
+                                                    "kg": 1_110_000.0}
+    st.on_message("s1", "truck", {"truck": 9, "passes": 4, "total_kg": 130000.0,
+                                  "target_kg": 136000.0, "status": "ok", "closed": True,
+                                  "shift": {"trucks": 9, "passes": 41, "kg": 1_180_000.0}})
+    assert st.snapshot()["shovels"][0]["shift"] == {"trucks": 9, "passes": 41,
+                                                    "kg": 1_180_000.0}
