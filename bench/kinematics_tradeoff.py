@@ -22,7 +22,7 @@ from shoveld.cycle.phases import ESTIMATING
 from shoveld.engine.loop import EngineConfig
 from shoveld.engine.offline import estimate_table
 from shoveld.identify.calibrate import Calibrator
-from shoveld.kinematics import causal
+from shoveld.kinematics import DEFAULT_POLYORDER, DEFAULT_WINDOW_S, causal
 from shoveld.kinematics.fixed_lag import FixedLagSavgol
 from shoveld.kinematics.offline import offline_kinematics
 from shoveld.sim.plant import derivative
@@ -89,7 +89,7 @@ def main() -> None:
     loop.HANDLE = original
     ests = estimate_table(table, params, EngineConfig(payload_rates="fixed_lag")).passes
     err = np.array([p.payload_kg for p in ests]) - truth
-    f = FixedLagSavgol(EngineConfig().window_s, dt, 1)
+    f = FixedLagSavgol(DEFAULT_WINDOW_S, dt, 1, DEFAULT_POLYORDER)
     fl = [f.push(t, (math.radians(h),), t) for t, h in zip(table.time, table["handle_deg"],
                                                                strict=True)]
     t_c = np.array([o[0] for o in fl if o is not None])

@@ -17,6 +17,10 @@ beside the ideal simulator:
 
     .venv/bin/python bench/payload_accuracy.py [--machines 6] [--passes 60]
                                                [--coverage 24] [--jobs 2]
+                                               [--window S --polyorder N]
+
+``--window``/``--polyorder`` set the angles' Savitzky-Golay smoothing of identification
+(the engine follows what the params record); docs/engine.md, "Smoothing".
 """
 
 from __future__ import annotations
@@ -47,13 +51,21 @@ def truth_of(machine: Any, params: Any) -> dict[str, float]:
     return out
 
 
+SMOOTHING: dict[str, Any] = {}
+"""Calibrator keywords from the command line (set in each worker by ``_init``)."""
+
+
+def _init(smoothing: dict[str, Any]) -> None:
+    SMOOTHING.update(smoothing)
+
+
 def calibrate(machine: Any, seed: int, method: str) -> Any:
     from shoveld.identify.calibrate import Calibrator
     from shoveld.sim.scenario import simulate_calibration
 
     tables = [simulate_calibration(0.0, seed=10 * seed + 1, machine=machine).table,
               simulate_calibration(8420.0, seed=10 * seed + 2, machine=machine).table]
-    cal = Calibrator(method=method).fit(tables)
+    cal = Calibrator(method=method, **SMOOTHING).fit(tables)
     return cal.params_
 
 
@@ -130,9 +142,15 @@ def main() -> None:
     ap.add_argument("--coverage", type=int, default=24,
                     help="machines for the parameter coverage table")
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--window", type=float, help="smoothing window, s (default: calibrate's)")
+    ap.add_argument("--polyorder", type=int, help="smoothing order (default: calibrate's)")
     args = ap.parse_args()
+    smoothing = {k: v for k, v in (("window_s", args.window), ("polyorder", args.polyorder))
+                 if v is not None}
+    if smoothing:
+        print(f"smoothing: {smoothing}")
     t0 = time.perf_counter()
-    with ProcessPoolExecutor(args.jobs) as ex:
+    with ProcessPoolExecutor(args.jobs, initializer=_init, initargs=(smoothing,)) as ex:
         res = list(ex.map(one_machine, [{"seed": s, "passes": args.passes}
                                         for s in range(1, args.machines + 1)]))
         cov = list(ex.map(coverage_machine, range(101, 101 + args.coverage)))

@@ -9,6 +9,7 @@ import sys
 
 from shoveld.cli import CliError
 from shoveld.cli.common import parse_effects, read_tables
+from shoveld.kinematics import DEFAULT_POLYORDER, DEFAULT_WINDOW_S
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -26,8 +27,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "equation: the thesis form, for comparison")
     p.add_argument("--effects", default="", metavar="NAME,...",
                    help="extension terms to add to the base model")
-    p.add_argument("--window", type=float, default=0.5,
-                   help="zero-phase smoothing window for rates, s")
+    p.add_argument("--window", type=float, default=DEFAULT_WINDOW_S,
+                   help="zero-phase smoothing window for rates, s (recorded in the params; "
+                        "the engine uses the same)")
+    p.add_argument("--polyorder", type=int, default=DEFAULT_POLYORDER,
+                   help="order of the Savitzky-Golay fit over that window")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.add_argument("--plot", metavar="DIR",
                    help="write PNG plots of the fit (residuals, exclusions) per file")
@@ -84,7 +88,8 @@ def run(args: argparse.Namespace) -> int:
     tables = read_tables(args.files)
     try:
         model = Model.from_names(parse_effects(args.effects))
-        cal = Calibrator(model=model, method=args.method, window_s=args.window).fit(tables)
+        cal = Calibrator(model=model, method=args.method, window_s=args.window,
+                         polyorder=args.polyorder).fit(tables)
     except ValueError as e:
         raise CliError(str(e)) from None
     assert cal.params_ is not None

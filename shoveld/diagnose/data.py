@@ -19,6 +19,7 @@ import numpy as np
 from shoveld.cycle.offline import label_phases
 from shoveld.cycle.phases import DIG, LIFT, SWING
 from shoveld.identify.calibrate import ExclusionConfig, FileData, exclusion_masks
+from shoveld.kinematics import DEFAULT_POLYORDER, DEFAULT_WINDOW_S
 from shoveld.model.model import Model
 from shoveld.model.terms import Term
 from shoveld.signals.table import SignalsTable
@@ -95,7 +96,8 @@ class DataSet:
     calib: list[SignalsTable]
     measured: list[SignalsTable]
     exclusion: ExclusionConfig = field(default_factory=ExclusionConfig)
-    window_s: float = 0.5
+    window_s: float = DEFAULT_WINDOW_S
+    polyorder: int = DEFAULT_POLYORDER
     _views: dict[tuple[Any, ...], View] = field(default_factory=dict)
     _calib_only: dict[tuple[Any, ...], list[FileData]] = field(default_factory=dict)
     passes: list[Pass] = field(default_factory=list)
@@ -110,7 +112,8 @@ class DataSet:
         if key in self._views:
             return self._views[key].calib
         if key not in self._calib_only:
-            self._calib_only[key] = [exclusion_masks(t, model, self.exclusion, self.window_s)
+            self._calib_only[key] = [exclusion_masks(t, model, self.exclusion, self.window_s,
+                                                     self.polyorder)
                                      for t in self.calib]
         return self._calib_only[key]
 
@@ -124,7 +127,8 @@ class DataSet:
                 # Validity without "payload unknown": fill the payload for the masks only.
                 filled = SignalsTable(dict(t.columns), dict(t.meta), t.source)
                 filled.columns["payload_kg"] = np.where(np.isfinite(truth[-1]), truth[-1], 0.0)
-                measured.append(exclusion_masks(filled, model, self.exclusion, self.window_s))
+                measured.append(exclusion_masks(filled, model, self.exclusion,
+                                                self.window_s, self.polyorder))
             self._views[key] = View(calib, measured, truth)
         return self._views[key]
 

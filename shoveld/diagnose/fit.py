@@ -35,7 +35,7 @@ class DiagCalibrator(Calibrator):
     def __init__(self, model: Model, dataset: DataSet, train: set[int] | None,
                  method: str = "output") -> None:
         super().__init__(model=model, method=method, exclusion=dataset.exclusion,
-                         window_s=dataset.window_s)
+                         window_s=dataset.window_s, polyorder=dataset.polyorder)
         self.dataset = dataset
         self.train = train
 

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from shoveld.cycle.phases import DIG, DUMP, ESTIMATING, IDLE, PHASES, PhaseConfig, PhaseMachine
+from shoveld.kinematics import DEFAULT_POLYORDER, LEGACY_POLYORDER, LEGACY_WINDOW_S
 from shoveld.kinematics.causal import CROWD, HANDLE, SWING, JointFilter
 from shoveld.kinematics.fixed_lag import FixedLagSavgol
 from shoveld.model.kin import Kinematics
@@ -43,8 +44,11 @@ class EngineConfig:
     payload_rates: str = "fixed_lag"
     """'fixed_lag' (zero-phase, half a window late) or 'kalman' (causal, biased by lag);
     kept for bench/kinematics_tradeoff.py, which measures the difference."""
-    window_s: float = 0.5
-    """Zero-phase window of the payload equations (identification uses the same)."""
+    window_s: float | None = None
+    """Zero-phase window of the payload equations; None: the one the params were
+    identified with (the two must agree, or the inertia terms disagree by a few %)."""
+    polyorder: int | None = None
+    """Order of that Savitzky-Golay fit; None: as identified."""
     batch: int = 10
     """Samples per payload-filter update (one model evaluation and one filter update
     per block; the live payload moves in steps of this many ticks)."""
@@ -101,6 +105,18 @@ class TruckResult:
 Event = LiveEstimate | PassResult | TruckResult
 
 
+def smoothing(params: ModelParams, cfg: EngineConfig) -> tuple[float, int]:
+    """The Savitzky-Golay window and order of the payload equations: as configured, else
+    as recorded by the calibration, else what unrecorded params were identified with."""
+    fit = params.fit or {}
+    recorded = "window_s" in fit
+    window = cfg.window_s if cfg.window_s is not None else float(
+        fit["window_s"] if recorded else LEGACY_WINDOW_S)
+    order = cfg.polyorder if cfg.polyorder is not None else int(
+        fit.get("polyorder", DEFAULT_POLYORDER) if recorded else LEGACY_POLYORDER)
+    return window, order
+
+
 class Engine:
     """Causal payload pipeline for one shovel."""
 
@@ -119,8 +135,9 @@ class Engine:
         self.batch: list[tuple[float, ...]] = []
         self._cached: tuple[int, float, float] = (-1, math.nan, math.nan)
         self.uses_field = any(getattr(t, "uses_field_current", False) for t in self.model.terms)
+        self.window_s, self.polyorder = smoothing(params, self.cfg)
         self.lagged: FixedLagSavgol[tuple[Sample, bool, int]] = FixedLagSavgol(
-            self.cfg.window_s, dt, 3)
+            self.window_s, dt, 3, self.polyorder)
         self.phases = PhaseMachine(self.cfg.phases)
         self.noise = (params.noise["handle"], params.noise["crowd"])
         self.current_noise = params.current_noise

@@ -22,6 +22,7 @@ import numpy as np
 
 from shoveld.identify import output_error
 from shoveld.identify.output_error import fit_output
+from shoveld.kinematics import DEFAULT_POLYORDER, DEFAULT_WINDOW_S
 from shoveld.kinematics.offline import offline_kinematics
 from shoveld.model.kin import Kinematics
 from shoveld.model.model import EQUATIONS, Model
@@ -63,13 +64,20 @@ class FileData:
     excluded: Counter[str]
 
 
+NEIGHBOUR_CURRENTS_S = 0.5
+"""Span of the neighbouring samples that estimate a current for terms nonlinear in it."""
+
+
 def exclusion_masks(table: SignalsTable, model: Model, cfg: ExclusionConfig,
-                    window_s: float = 0.5) -> FileData:
+                    window_s: float = DEFAULT_WINDOW_S,
+                    polyorder: int = DEFAULT_POLYORDER) -> FileData:
     """Kinematics of a table and, per sample, whether and why it is excluded."""
     cols = model.transform(dict(table.columns))
-    kin, ok = offline_kinematics(cols, window_s)
-    # Terms nonlinear in a current take it from the neighbouring samples (see Kinematics).
-    kin.estimate_currents(int(round(window_s * table.sample_rate_hz)))
+    kin, ok = offline_kinematics(cols, window_s, polyorder)
+    # Terms nonlinear in a current take it from the neighbouring samples (see Kinematics),
+    # over a fixed half second: what the extension terms were measured with, whatever the
+    # smoothing of the angles.
+    kin.estimate_currents(int(round(NEIGHBOUR_CURRENTS_S * table.sample_rate_hz)))
     n = len(kin)
     reasons = np.full(n, "", dtype=object)
     payload = table.payload_truth()
@@ -234,13 +242,17 @@ class Calibrator:
     model: Model = field(default_factory=Model.from_names)
     method: str = "output"
     exclusion: ExclusionConfig = field(default_factory=ExclusionConfig)
-    window_s: float = 0.5
+    window_s: float = DEFAULT_WINDOW_S
+    """Zero-phase smoothing of the joint angles (recorded in the params; the engine uses
+    the same)."""
+    polyorder: int = DEFAULT_POLYORDER
     files_: list[FileData] = field(default_factory=list, init=False)
     params_: ModelParams | None = field(default=None, init=False)
     stages_: list[StageResult] = field(default_factory=list, init=False)
 
     def prepare(self, tables: list[SignalsTable]) -> list[FileData]:
-        return [exclusion_masks(t, self.model, self.exclusion, self.window_s) for t in tables]
+        return [exclusion_masks(t, self.model, self.exclusion, self.window_s, self.polyorder)
+                for t in tables]
 
     def _choose_field_knots(self, tables: list[SignalsTable]) -> None:
         """Give the hoist drive its field-current knots from the data, unless given."""
@@ -301,7 +313,8 @@ class Calibrator:
             raise ValueError("no sample with a known non-zero payload: the equations are "
                              "homogeneous, a known-load trial is needed to fix the scale")
         p, cov, sigma = self._fit_equation(w_all, y_all)
-        fit: dict[str, Any] = {"method": method, "samples": int(len(w_all))}
+        fit: dict[str, Any] = {"method": method, "samples": int(len(w_all)),
+                               "window_s": self.window_s, "polyorder": self.polyorder}
         current_noise: dict[str, list[float]] = {}
         if method == "output":
             files = [f for f in self.files_ if f.use.any()]

@@ -25,11 +25,11 @@ T = TypeVar("T")
 class FixedLagSavgol(Generic[T]):
     """Push samples in; get (tag, derivatives) for the sample half a window ago."""
 
-    def __init__(self, window_s: float, dt: float, n_signals: int) -> None:
-        self.window = max(5, int(round(window_s / dt)) | 1)
+    def __init__(self, window_s: float, dt: float, n_signals: int, polyorder: int = 3) -> None:
+        self.window = max(polyorder + 2, int(round(window_s / dt))) | 1
         self.half = self.window // 2
         # Coefficients for the centre point: value, first and second derivative.
-        self.coeffs = np.stack([savgol_coeffs(self.window, 3, deriv=k, delta=dt, use="dot")
+        self.coeffs = np.stack([savgol_coeffs(self.window, polyorder, deriv=k, delta=dt, use="dot")
                                 for k in range(3)])
         # A doubled ring: every sample is written twice, so the window is always one
         # contiguous slice and the fit is a single small matrix product.

@@ -1,20 +1,21 @@
 """Zero-phase joint rates and accelerations for offline identification.
 
-Savitzky-Golay differentiation (a local cubic fit) is zero-phase, so currents
+Savitzky-Golay differentiation (a local polynomial fit) is zero-phase, so currents
 need no matching delay, and it has a sharper noise/bandwidth trade-off than the
 thesis's differentiate-then-Butterworth. Gaps (blank cells) split the data into
 segments; samples within half a window of a gap are marked invalid.
+The window and order are :mod:`shoveld.kinematics`'s defaults.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from shoveld.kinematics import DEFAULT_POLYORDER, DEFAULT_WINDOW_S
 from shoveld.kinematics.savgol import savgol_filter
 from shoveld.model.kin import Kinematics
 from shoveld.signals.table import SignalsTable
 
-DEFAULT_WINDOW_S = 0.5
 POSITION_COLUMNS = ("handle_deg", "crowd_m", "swing_deg", "boom_deg")
 
 
@@ -23,7 +24,8 @@ def _segments(valid: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(edges[::2], edges[1::2], strict=True))
 
 
-def savgol_derivatives(y: np.ndarray, dt: float, window: int, valid: np.ndarray
+def savgol_derivatives(y: np.ndarray, dt: float, window: int, valid: np.ndarray,
+                       polyorder: int = DEFAULT_POLYORDER
                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Smoothed value, first and second derivative; plus the mask where they are valid."""
     out = [np.full_like(y, np.nan) for _ in range(3)]
@@ -33,14 +35,15 @@ def savgol_derivatives(y: np.ndarray, dt: float, window: int, valid: np.ndarray
             continue
         seg = y[a:b]
         for k in range(3):
-            out[k][a:b] = savgol_filter(seg, window, 3, deriv=k, delta=dt)
+            out[k][a:b] = savgol_filter(seg, window, polyorder, deriv=k, delta=dt)
         half = window // 2
         ok[a + half:b - half] = True
     return out[0], out[1], out[2], ok
 
 
-def offline_kinematics(cols: dict[str, np.ndarray] | SignalsTable, window_s: float =
-                       DEFAULT_WINDOW_S) -> tuple[Kinematics, np.ndarray]:
+def offline_kinematics(cols: dict[str, np.ndarray] | SignalsTable,
+                       window_s: float = DEFAULT_WINDOW_S,
+                       polyorder: int = DEFAULT_POLYORDER) -> tuple[Kinematics, np.ndarray]:
     """Kinematics from a whole table, and the mask of samples where every input is valid."""
     if isinstance(cols, SignalsTable):
         cols = cols.columns
@@ -56,9 +59,10 @@ def offline_kinematics(cols: dict[str, np.ndarray] | SignalsTable, window_s: flo
     seg_valid = valid.copy()
     seg_valid[gap] = False
     th, thd, thdd, ok_th = savgol_derivatives(np.radians(cols["handle_deg"]), dt, window,
-                                              seg_valid)
-    d, dd, ddd, _ = savgol_derivatives(cols["crowd_m"], dt, window, seg_valid)
-    sw, swd, swdd, _ = savgol_derivatives(np.radians(cols["swing_deg"]), dt, window, seg_valid)
+                                              seg_valid, polyorder)
+    d, dd, ddd, _ = savgol_derivatives(cols["crowd_m"], dt, window, seg_valid, polyorder)
+    sw, swd, swdd, _ = savgol_derivatives(np.radians(cols["swing_deg"]), dt, window, seg_valid,
+                                      polyorder)
     boom = np.radians(np.where(np.isfinite(cols["boom_deg"]), cols["boom_deg"], 45.0))
     roll = np.radians(np.nan_to_num(cols["roll_deg"]))
     pitch = np.radians(np.nan_to_num(cols["pitch_deg"]))
