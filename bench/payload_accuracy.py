@@ -16,7 +16,7 @@ beside the ideal simulator:
   over the mean standard error (bias).
 
     .venv/bin/python bench/payload_accuracy.py [--machines 6] [--passes 60]
-                                               [--coverage 24] [--jobs 2]
+                                               [--coverage 120] [--jobs 2]
                                                [--window S --polyorder N]
 
 ``--window``/``--polyorder`` set the angles' Savitzky-Golay smoothing of identification
@@ -139,7 +139,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--machines", type=int, default=6)
     ap.add_argument("--passes", type=int, default=60, help="passes per machine")
-    ap.add_argument("--coverage", type=int, default=24,
+    ap.add_argument("--coverage", type=int, default=120,
                     help="machines for the parameter coverage table")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--window", type=float, help="smoothing window, s (default: calibrate's)")

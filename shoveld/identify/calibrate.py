@@ -257,10 +257,15 @@ class Calibrator:
     def _choose_field_knots(self, tables: list[SignalsTable]) -> None:
         """Give the hoist drive its field-current knots from the data, unless given."""
         hoist = next((t for t in self.model.terms if t.name == "hoist_drive"), None)
-        if hoist is None or "field_knots_a" in hoist.hyper:
+        if hoist is None or ("field_knots_a" in hoist.hyper
+                             and "above_top_knot" in hoist.hyper):
             return
-        nominal, knots = choose_field_knots(tables)
-        hyper = {**hoist.hyper, "field_nominal_a": nominal, "field_knots_a": knots}
+        if "field_knots_a" in hoist.hyper:
+            hyper = {**hoist.hyper, "above_top_knot": "slope"}
+        else:
+            nominal, knots = choose_field_knots(tables)
+            hyper = {**hoist.hyper, "field_nominal_a": nominal, "field_knots_a": knots,
+                     "above_top_knot": "slope"}
         self.model = Model([type(hoist)(**hyper) if t is hoist else t for t in self.model.terms])
 
     def _rows(self, files: list[FileData]) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:

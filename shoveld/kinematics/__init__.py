@@ -5,14 +5,12 @@ recorded in the params file: both must differentiate the angles the same way, or
 the inertia terms identified from one disagree with the accelerations of the other.
 """
 
-DEFAULT_WINDOW_S = 0.5
+DEFAULT_WINDOW_S = 0.82
 """Savitzky-Golay window of the zero-phase joint rates, s."""
-DEFAULT_POLYORDER = 3
-"""Its polynomial order. A cubic over 0.5 s passes 84 % of the acceleration at 1 Hz: it
-flattens the fast strokes' peaks and biases the arm inertia J by +3 % (5 standard
-errors). A 5th-order fit over 0.82 s (``calibrate --polyorder 5 --window 0.82``) has the
-same noise gain, passes 95 %, and removes that bias and a third of the payload's mean
-error, but K_H's error then grows to +0.9 standard errors: the default stays, and
-docs/engine.md ("Smoothing") gives both sets of figures."""
+DEFAULT_POLYORDER = 5
+"""Its polynomial order. A cubic over 0.5 s (the default until 2026-11-25) has the same
+noise gain on the acceleration but keeps only 84 % of it at 1 Hz (this fit 95 %): it
+flattened the fast strokes' peaks and biased the arm inertia J by +5 standard errors
+(3 %) and the payload by about +10 kg (docs/engine.md, "Smoothing")."""
 LEGACY_WINDOW_S, LEGACY_POLYORDER = 0.5, 3
 """What params files that do not record their smoothing were identified with."""

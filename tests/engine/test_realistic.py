@@ -91,11 +91,21 @@ def test_standard_errors_are_honest_over_machines(
     assert abs(e.mean()) < 0.5 * se.mean(), (name, e.mean(), se.mean())
 
 
-@pytest.mark.xfail(strict=True, reason="known: J is biased ~+3 % by the 0.5 s Savitzky-Golay "
-                   "fit of fast strokes, friction by errors in the estimated rates, the crowd "
-                   "offset by ~0.03 A against a 0.04 A standard error; see docs/engine.md")
-@pytest.mark.parametrize("name", ("J", "fv4", "fc4", "i_C0"))
-def test_dynamic_parameters_are_not_yet_unbiased(
+@pytest.mark.parametrize("name", ("J", "i_C0"))
+def test_inertia_and_crowd_offset_are_unbiased(
+        machine_runs: list[tuple[Machine, ModelParams]], name: str) -> None:
+    """J was biased by +5 standard errors while the angles were smoothed by a cubic over
+    0.5 s (it flattened the fast strokes' accelerations). Their 2-se coverage is still
+    short of 90 % (79-85 % over 120 machines, bench/payload_accuracy.py)."""
+    e = np.array([p.get(name) - machine_truth(m, p)[name] for m, p in machine_runs])
+    se = np.array([float(p.stderr[p.names.index(name)]) for _, p in machine_runs])
+    assert abs(e.mean()) < 0.5 * se.mean(), (name, e / se)
+
+
+@pytest.mark.xfail(strict=True, reason="known: the crowd friction is biased by errors in "
+                   "the estimated rates (+3 and -4 standard errors); see docs/engine.md")
+@pytest.mark.parametrize("name", ("fv4", "fc4"))
+def test_crowd_friction_is_not_yet_unbiased(
         machine_runs: list[tuple[Machine, ModelParams]], name: str) -> None:
     e = np.array([p.get(name) - machine_truth(m, p)[name] for m, p in machine_runs])
     se = np.array([float(p.stderr[p.names.index(name)]) for _, p in machine_runs])
