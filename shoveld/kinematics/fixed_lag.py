@@ -5,7 +5,7 @@ starts and ends with the acceleration changing, that lag does not average out
 over a pass: it biased payloads by -0.5 % to +0.4 % of the load depending on the
 window (bench/kinematics_tradeoff.py). Evaluating the equations of motion half a
 window late, with the same Savitzky-Golay fit as identification and the currents
-of that same instant, removes the bias at the price of a quarter-second delay,
+of that same instant, removes the bias at the price of a delay of half a window (0.41 s),
 which the operator never sees (the pass is final at the dump, seconds later).
 """
 
