@@ -9,6 +9,7 @@ import sys
 
 from shoveld.cli import CliError
 from shoveld.cli.common import parse_effects, read_tables
+from shoveld.identify import ANGLE_DRIFT_DEG
 from shoveld.kinematics import DEFAULT_POLYORDER, DEFAULT_WINDOW_S
 
 
@@ -32,6 +33,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "the engine uses the same)")
     p.add_argument("--polyorder", type=int, default=DEFAULT_POLYORDER,
                    help="order of the Savitzky-Golay fit over that window")
+    p.add_argument("--angle-drift", type=float, default=ANGLE_DRIFT_DEG, metavar="DEG",
+                   help="slow drift of the handle-angle sensor within a file (1 sigma, "
+                        "from its data sheet), counted in the standard errors; 0: not")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.add_argument("--plot", metavar="DIR",
                    help="write PNG plots of the fit (residuals, exclusions) per file")
@@ -89,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         model = Model.from_names(parse_effects(args.effects))
         cal = Calibrator(model=model, method=args.method, window_s=args.window,
-                         polyorder=args.polyorder).fit(tables)
+                         polyorder=args.polyorder, angle_drift_deg=args.angle_drift).fit(tables)
     except ValueError as e:
         raise CliError(str(e)) from None
     assert cal.params_ is not None

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from shoveld.identify import output_error
+from shoveld.identify import ANGLE_DRIFT_DEG, output_error
 from shoveld.identify.output_error import fit_output
 from shoveld.kinematics import DEFAULT_POLYORDER, DEFAULT_WINDOW_S
 from shoveld.kinematics.offline import offline_kinematics
@@ -246,8 +246,13 @@ class Calibrator:
     """Zero-phase smoothing of the joint angles (recorded in the params; the engine uses
     the same)."""
     polyorder: int = DEFAULT_POLYORDER
+    angle_drift_deg: float = ANGLE_DRIFT_DEG
+    """The handle-angle sensor's slow drift within a file (1 sigma), counted in the
+    standard errors; 0 leaves it out."""
     files_: list[FileData] = field(default_factory=list, init=False)
     params_: ModelParams | None = field(default=None, init=False)
+    output_fit_: output_error.OutputFit | None = field(default=None, init=False)
+    """The output-error fit behind ``params_`` (its sensitivities, noise, lag)."""
     stages_: list[StageResult] = field(default_factory=list, init=False)
 
     def prepare(self, tables: list[SignalsTable]) -> list[FileData]:
@@ -325,7 +330,9 @@ class Calibrator:
             files = [f for f in self.files_ if f.use.any()]
             of = fit_output(self.model, [f.kin.take(f.use) for f in files],
                             [f.payload[f.use] for f in files],
-                            [np.asarray(o) for o in oks], p)
+                            [np.asarray(o) for o in oks], p,
+                            angle_drift_deg=self.angle_drift_deg)
+            self.output_fit_ = of
             p, cov = of.p, of.cov
             sigma = np.array([of.force_rms["handle"], of.force_rms["crowd"]])
             current_noise = of.noise
@@ -334,7 +341,9 @@ class Calibrator:
                                                                     strict=True)},
                        current_residual_rms_a=of.residual_rms, iterations=of.iterations,
                        covariance=f"sandwich over {of.blocks} blocks of "
-                                  f"{output_error.BLOCK_S:g} s")
+                                  f"{output_error.BLOCK_S:g} s, plus a handle-angle drift "
+                                  f"of {self.angle_drift_deg:g} deg per file",
+                       angle_drift_deg=self.angle_drift_deg)
         else:
             cond = condition_number((w_all / sigma[None, :, None]).reshape(-1, len(names)))
             fit.update(condition_number=cond,

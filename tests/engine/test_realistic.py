@@ -71,9 +71,11 @@ def machine_runs() -> list[tuple[Machine, ModelParams]]:
     return out
 
 
-PAYLOAD_PARAMS = ("Md", "MdLc", "K_H", "K_C", "i_H0")
+PAYLOAD_PARAMS = ("Md", "MdLc", "K_H", "K_C", "i_H0", "i_C0", "J")
 """What the payload rests on: gravity, the force constants at the nominal field, the
-offsets."""
+offsets, and the arm's inertia (biased +5 standard errors until the angles' smoothing
+kept the fast strokes' accelerations; short of 90 % coverage with MdLc and the offsets
+until the handle sensor's drift was counted in the standard errors)."""
 
 
 @pytest.mark.parametrize("name", PAYLOAD_PARAMS)
@@ -89,17 +91,6 @@ def test_standard_errors_are_honest_over_machines(
     e, se = np.array(errs), np.array(ses)
     assert np.mean(np.abs(e) <= 2 * se) >= 0.9, (name, e / se)
     assert abs(e.mean()) < 0.5 * se.mean(), (name, e.mean(), se.mean())
-
-
-@pytest.mark.parametrize("name", ("J", "i_C0"))
-def test_inertia_and_crowd_offset_are_unbiased(
-        machine_runs: list[tuple[Machine, ModelParams]], name: str) -> None:
-    """J was biased by +5 standard errors while the angles were smoothed by a cubic over
-    0.5 s (it flattened the fast strokes' accelerations). Their 2-se coverage is still
-    short of 90 % (79-85 % over 120 machines, bench/payload_accuracy.py)."""
-    e = np.array([p.get(name) - machine_truth(m, p)[name] for m, p in machine_runs])
-    se = np.array([float(p.stderr[p.names.index(name)]) for _, p in machine_runs])
-    assert abs(e.mean()) < 0.5 * se.mean(), (name, e / se)
 
 
 @pytest.mark.xfail(strict=True, reason="known: the crowd friction is biased by errors in "
