@@ -252,7 +252,7 @@ class Calibrator:
     files_: list[FileData] = field(default_factory=list, init=False)
     params_: ModelParams | None = field(default=None, init=False)
     output_fit_: output_error.OutputFit | None = field(default=None, init=False)
-    """The output-error fit behind ``params_`` (its sensitivities, noise, lag)."""
+    """The output-error fit behind ``params_`` (its angle sensitivities, noise model)."""
     stages_: list[StageResult] = field(default_factory=list, init=False)
 
     def prepare(self, tables: list[SignalsTable]) -> list[FileData]:

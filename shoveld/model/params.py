@@ -145,7 +145,8 @@ def load_params(path: str | Path) -> ModelParams:
     try:
         model = Model.from_names(terms, hyper)
     except ValueError as e:
-        raise ParamsFileError(f"{spath}: key 'terms': {e}") from None
+        where = "" if str(e).startswith("hyper.") else "key 'terms': "
+        raise ParamsFileError(f"{spath}: {where}{e}") from None
     params = need(doc, "params", "", dict)
     values, stderr = [], []
     for n in model.param_names:

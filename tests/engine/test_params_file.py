@@ -84,3 +84,15 @@ def test_an_output_in_a_missing_folder_is_one_line(tmp_path: Path, capsys,
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "Traceback" not in err
     assert "no/such" in err and "does not exist" in err
+
+
+def test_the_field_curve_above_its_top_knot_is_read_or_refused(tmp_path: Path) -> None:
+    """Files written before the key keep the flat curve they were identified with."""
+    assert load_params(GOOD).model().terms[1].above == "flat"
+    head = "[hyper.hoist_drive]\n"
+    p = variant(tmp_path, head, head + 'above_top_knot = "slope"\n')
+    assert load_params(p).model().terms[1].above == "slope"
+    p = variant(tmp_path, head, head + 'above_top_knot = "up"\n')
+    with pytest.raises(ParamsFileError, match=r"params\.toml: hyper\.hoist_drive\.above_top_knot: "
+                                              r"expected 'slope' or 'flat', got 'up'"):
+        load_params(p)
