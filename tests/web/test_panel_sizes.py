@@ -1,0 +1,79 @@
+"""The cab page on the panel sizes cab displays come in: what the operator reads at a
+glance (the dipper's payload, what the truck holds, what is still to go, the hint) is on
+the first screen without scrolling, and nothing runs off the side."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Iterator
+
+import pytest
+
+from shoveld.web.browser import open_browser
+from shoveld.web.server import ThreadedScreen
+from shoveld.web.state import ScreenState
+from tests.daemon.conftest import wait_for
+
+AT_A_GLANCE = ("payload", "truck-total", "remaining", "hint")
+
+
+@pytest.fixture(scope="module")
+def screen() -> Iterator[ThreadedScreen]:
+    """A shovel in the middle of a truck, kept alive by a message every half second."""
+    st = ScreenState()
+    st.set_link("up", "test")
+    st.on_alive("s1", True)
+    st.on_message("s1", "truck", {"truck": 4, "passes": 3, "total_kg": 93000.0,
+                                  "target_kg": 136000.0, "fill_pct": 68.4, "status": "under"})
+    for i in range(3):
+        st.on_message("s1", "pass", {"pass": i + 1, "truck": 4, "payload_kg": 31000.0,
+                                     "std_kg": 110.0, "valid": True, "end": time.time()})
+    stop = threading.Event()
+
+    def feed() -> None:
+        while not stop.is_set():
+            st.on_message("s1", "payload/live", {"payload_kg": 31234.0, "std_kg": 120.0,
+                                                 "valid": True, "phase": "swing"})
+            stop.wait(0.5)
+
+    feeder = threading.Thread(target=feed, daemon=True)
+    feeder.start()
+    page = ThreadedScreen(st)
+    try:
+        yield page
+    finally:
+        stop.set()
+        feeder.join(2)
+        page.close()
+
+
+@pytest.mark.parametrize(("width", "height"), [(1280, 800), (1024, 600), (800, 480)])
+def test_what_the_operator_reads_is_on_the_first_screen(screen: ThreadedScreen, width: int,
+                                                        height: int) -> None:
+    b = open_browser(width, height)
+    try:
+        b.get(screen.url)
+        assert wait_for(lambda: b.find_element("id", "payload").text == "31.2 t", 10.0), \
+            b.find_element("id", "payload").text
+        view = b.execute_script("return [innerWidth, innerHeight, "
+                                "document.documentElement.scrollWidth]")
+        inner_w, inner_h, scroll_w = view
+        assert scroll_w <= inner_w, (width, scroll_w, inner_w)
+        for element_id in AT_A_GLANCE:
+            box = b.execute_script(
+                "const r = document.getElementById(arguments[0]).getBoundingClientRect();"
+                "return [r.left, r.top, r.right, r.bottom]", element_id)
+            left, top, right, bottom = box
+            assert bottom > top and 0 <= left and right <= inner_w and bottom <= inner_h, \
+                (width, height, element_id, box)
+        assert b.find_element("id", "remaining").text == "43.0 t"
+        # the dipper's number is the largest on the screen at every size
+        sizes = b.execute_script(
+            "return Array.from(document.querySelectorAll('body *')).map("
+            "e => parseFloat(getComputedStyle(e).fontSize))")
+        payload_px = b.execute_script(
+            "return parseFloat(getComputedStyle(document.getElementById('payload')).fontSize)")
+        assert payload_px == max(sizes) and payload_px >= 40, (payload_px, max(sizes))
+    finally:
+        b.quit()
