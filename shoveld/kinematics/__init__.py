@@ -14,3 +14,9 @@ flattened the fast strokes' peaks and biased the arm inertia J by +5 standard er
 (3 %) and the payload by about +10 kg (docs/engine.md, "Smoothing")."""
 LEGACY_WINDOW_S, LEGACY_POLYORDER = 0.5, 3
 """What params files that do not record their smoothing were identified with."""
+
+
+def window_samples(window_s: float, dt: float, polyorder: int) -> int:
+    """The odd number of samples of a ``window_s`` window at step ``dt``: one rule for the
+    offline fit and the live fixed-lag one, at least two more than the order."""
+    return max(polyorder + 2, round(window_s / dt)) | 1

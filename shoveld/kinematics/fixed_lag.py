@@ -17,6 +17,7 @@ from typing import Generic, TypeVar
 
 import numpy as np
 
+from shoveld.kinematics import window_samples
 from shoveld.kinematics.savgol import savgol_coeffs
 
 T = TypeVar("T")
@@ -26,7 +27,7 @@ class FixedLagSavgol(Generic[T]):
     """Push samples in; get (tag, derivatives) for the sample half a window ago."""
 
     def __init__(self, window_s: float, dt: float, n_signals: int, polyorder: int = 3) -> None:
-        self.window = max(polyorder + 2, int(round(window_s / dt))) | 1
+        self.window = window_samples(window_s, dt, polyorder)
         self.half = self.window // 2
         # Coefficients for the centre point: value, first and second derivative.
         self.coeffs = np.stack([savgol_coeffs(self.window, polyorder, deriv=k, delta=dt, use="dot")

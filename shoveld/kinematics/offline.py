@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from shoveld.kinematics import DEFAULT_POLYORDER, DEFAULT_WINDOW_S
+from shoveld.kinematics import DEFAULT_POLYORDER, DEFAULT_WINDOW_S, window_samples
 from shoveld.kinematics.savgol import savgol_filter
 from shoveld.model.kin import Kinematics
 from shoveld.signals.table import SignalsTable
@@ -49,7 +49,7 @@ def offline_kinematics(cols: dict[str, np.ndarray] | SignalsTable,
         cols = cols.columns
     t = cols["time_s"]
     dt = float(np.median(np.diff(t)))
-    window = max(5, int(round(window_s / dt)) | 1)
+    window = window_samples(window_s, dt, polyorder)
     i_h = cols["hoist1_a"] + cols["hoist2_a"]
     valid = np.isfinite(i_h) & np.isfinite(cols["crowd_a"]) & np.isfinite(cols["hoist_field_a"])
     for c in POSITION_COLUMNS:

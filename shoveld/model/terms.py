@@ -13,6 +13,7 @@ Each term owns some parameters and contributes their columns of ``W`` (and of
 
 from __future__ import annotations
 
+import functools
 from typing import Any, ClassVar
 
 import numpy as np
@@ -142,7 +143,7 @@ def field_basis(i_f: np.ndarray, knots: tuple[float, ...], slope_above: bool = T
     out = spline(np.clip(x, kn[0], kn[-1]))
     above = x > kn[-1]
     if slope_above and above.any():
-        top, slope = _end_slope(spline, tuple(kn))
+        top, slope = _end_slope(tuple(kn))
         step = np.minimum(x[above], kn[-1] + 0.5 * (kn[-1] - kn[-2])) - kn[-1]
         out[above] = top[None, :] + step[:, None] * slope[None, :]
     below = x < kn[0]
@@ -152,31 +153,20 @@ def field_basis(i_f: np.ndarray, knots: tuple[float, ...], slope_above: bool = T
     return out
 
 
-def _end_slope(spline: Any, kn: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
-    """Weights of the curve's value and slope at the highest knot (cached; the basis is
-    a cubic on the last segment, so a one-sided difference over a millionth of it is
-    exact to about that much)."""
-    got = _END_SLOPES.get(kn)
-    if got is None:
-        d = 1e-6 * (kn[-1] - kn[-2])
-        rows = spline(np.array([kn[-1], kn[-1] - d]))
-        got = _END_SLOPES[kn] = (rows[0], (rows[0] - rows[1]) / d)
-    return got
+@functools.cache
+def _end_slope(kn: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """Weights of the curve's value and slope at the highest knot (the basis is a cubic
+    on the last segment, so a one-sided difference over a millionth of it is exact to
+    about that much)."""
+    d = 1e-6 * (kn[-1] - kn[-2])
+    rows = _spline_basis(kn)(np.array([kn[-1], kn[-1] - d]))
+    return rows[0], (rows[0] - rows[1]) / d
 
 
-_END_SLOPES: dict[tuple[float, ...], tuple[np.ndarray, np.ndarray]] = {}
-
-
-_SPLINES: dict[tuple[float, ...], Any] = {}
-
-
+@functools.cache
 def _spline_basis(knots: tuple[float, ...]) -> Any:
-    """The natural cubic spline through each unit vector of knot values (cached)."""
-    sp = _SPLINES.get(knots)
-    if sp is None:
-        sp = _NaturalSpline(knots) if len(knots) > 2 else _Linear(knots)
-        _SPLINES[knots] = sp
-    return sp
+    """The natural cubic spline through each unit vector of knot values."""
+    return _NaturalSpline(knots) if len(knots) > 2 else _Linear(knots)
 
 
 class _NaturalSpline:
