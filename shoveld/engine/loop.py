@@ -136,7 +136,7 @@ class Engine:
         self._cached: tuple[int, float, float] = (-1, math.nan, math.nan)
         self.uses_field = any(getattr(t, "uses_field_current", False) for t in self.model.terms)
         self.window_s, self.polyorder = smoothing(params, self.cfg)
-        self.lagged: FixedLagSavgol[tuple[Sample, bool, int]] = FixedLagSavgol(
+        self.lagged: FixedLagSavgol[tuple[Sample, bool, int] | None] = FixedLagSavgol(
             self.window_s, dt, 3, self.polyorder)
         self.phases = PhaseMachine(self.cfg.phases)
         self.noise = (params.noise["handle"], params.noise["crowd"])
@@ -187,18 +187,15 @@ class Engine:
         valid = False
         settled = ph in ESTIMATING and t - self.dig_end >= self.cfg.settle_s
         lag = self.lagged
-        tag = lag.push_tag(t, (z_th, z_d, 0.0 if z_sw != z_sw else z_sw),
-                           (s, settled, self._cycle))
         if self.cfg.payload_rates == "kalman":
             if settled and self.rls is not None:
                 valid = self._update(s, th, d, sw, thd, dd, swd, thdd, ddd, swdd)
-        elif tag is not None:
-            s_lag, settled_lag, cycle_lag = tag
-            if settled_lag and cycle_lag == self._cycle and self.rls is not None:
-                kin = lag.derivatives()  # the fit only where it is used
-                valid = self._update(s_lag, *kin[0], *kin[1], *kin[2])
-        elif ph in ESTIMATING:
-            self.invalid_updates += 1
+        else:
+            for _ in range(lag.gap(t)):  # ticks the loop skipped: holes in the window
+                valid = self._lagged(lag.push_hole(), ph) or valid
+            valid = self._lagged(lag.push_tag(
+                t, (z_th, z_d, 0.0 if z_sw != z_sw else z_sw), (s, settled, self._cycle)),
+                ph) or valid
         if self.batch and ph not in ESTIMATING:
             self._flush()
         if self.rls is not None and self.rls.n:
@@ -266,6 +263,18 @@ class Engine:
         self.last_dump_t = t
         self.rls = None
         return [pr, TruckResult(self.truck, closed=False)]
+
+    def _lagged(self, tag: tuple[Sample, bool, int] | None, ph: int) -> bool:
+        """The payload update of the sample the fixed-lag fit has just centred on."""
+        if tag is None:
+            if ph in ESTIMATING:
+                self.invalid_updates += 1
+            return False
+        s_lag, settled_lag, cycle_lag = tag
+        if settled_lag and cycle_lag == self._cycle and self.rls is not None:
+            kin = self.lagged.derivatives()  # the fit only where it is used
+            return self._update(s_lag, *kin[0], *kin[1], *kin[2])
+        return False
 
     def _update(self, s: Sample, th: float, d: float, sw: float, thd: float, dd: float,
                 swd: float, thdd: float, ddd: float, swdd: float) -> bool:

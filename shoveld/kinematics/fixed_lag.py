@@ -7,12 +7,18 @@ window (bench/kinematics_tradeoff.py). Evaluating the equations of motion half a
 window late, with the same Savitzky-Golay fit as identification and the currents
 of that same instant, removes the bias at the price of a delay of half a window (0.41 s),
 which the operator never sees (the pass is final at the dump, seconds later).
+
+A short hole in the stream (ticks the loop skipped on a busy host, a sample with an
+unknown angle) does not restart the window: the windows over it are fitted to the
+samples they have, so a lift keeps its payload equations instead of losing a whole
+window (0.82 s) for one late tick. A hole longer than ``max_gap_s`` restarts.
 """
 
 from __future__ import annotations
 
 import math
 from collections import deque
+from functools import lru_cache
 from typing import Generic, TypeVar
 
 import numpy as np
@@ -22,53 +28,115 @@ from shoveld.kinematics.savgol import savgol_coeffs
 
 T = TypeVar("T")
 
+MAX_GAP_S = 0.1
+"""The longest hole in the angle stream the fixed-lag fit bridges (5 ticks at 50 Hz)."""
+
 
 class FixedLagSavgol(Generic[T]):
     """Push samples in; get (tag, derivatives) for the sample half a window ago."""
 
-    def __init__(self, window_s: float, dt: float, n_signals: int, polyorder: int = 3) -> None:
+    def __init__(self, window_s: float, dt: float, n_signals: int, polyorder: int = 3,
+                 max_gap_s: float = MAX_GAP_S) -> None:
         self.window = window_samples(window_s, dt, polyorder)
         self.half = self.window // 2
+        self.polyorder = polyorder
         # Coefficients for the centre point: value, first and second derivative.
         self.coeffs = np.stack([savgol_coeffs(self.window, polyorder, deriv=k, delta=dt, use="dot")
                                 for k in range(3)])
         # A doubled ring: every sample is written twice, so the window is always one
         # contiguous slice and the fit is a single small matrix product.
         self._ring = np.zeros((2 * self.window, n_signals))
+        self._hole = np.zeros(2 * self.window, dtype=bool)
+        self._holes = 0
+        """Holes (missing samples) in the ring."""
         self._pos = 0
         self._count = 0
-        self.tags: deque[T] = deque(maxlen=self.window)
+        self.tags: deque[T | None] = deque(maxlen=self.window)
         self.n = n_signals
         self.dt = dt
+        self.max_gap = max(0, round(max_gap_s / dt))
+        """The longest run of missing samples bridged (longer restarts)."""
+        self.max_holes = (self.window - polyorder - 1) // 4
+        """Beyond this many holes in a window its fit is NaN: too few samples left."""
+        self._run = 0
+        """Missing samples since the last sample with values."""
         self._last_t = math.nan
 
     def push(self, t: float, values: tuple[float, ...], tag: T
-             ) -> tuple[T, np.ndarray] | None:
+             ) -> tuple[T | None, np.ndarray] | None:
         """Add a sample; once the window is full, return the centre sample's tag and a
-        (3, n_signals) array of value, rate and acceleration. NaN or a time gap restarts."""
+        (3, n_signals) array of value, rate and acceleration. A long gap restarts; for a
+        short one, call :meth:`gap` and :meth:`push_hole` first (or lose those centres)."""
         tag_c = self.push_tag(t, values, tag)
-        if self._count < self.window:  # (not full, or restarted by a NaN)
+        if self._count < self.window:  # (not full, or restarted)
             return None
-        return tag_c, self.derivatives()  # type: ignore[return-value]
+        return tag_c, self.derivatives()
+
+    def gap(self, t: float) -> int:
+        """How many ticks were missed between the last sample and ``t`` that the filter
+        will bridge: push that many holes (:meth:`push_hole`) before the sample at ``t``.
+        0 when none were missed, or when the gap is too long (the push then restarts)."""
+        last = self._last_t
+        if last != last:
+            return 0
+        n = round((t - last) / self.dt) - 1
+        return n if 0 < n and self._run + n <= self.max_gap else 0
+
+    def push_hole(self, tag: T | None = None) -> T | None:
+        """Advance one tick with no sample; the centre sample's tag as :meth:`push_tag`."""
+        self._last_t += self.dt
+        self._run += 1
+        return self._write(None, tag)
 
     def push_tag(self, t: float, values: tuple[float, ...], tag: T) -> T | None:
         """:meth:`push` without the fit: the centre sample's tag once the window is full
         (else None); :meth:`derivatives` then gives its fit. The live loop needs the fit
-        for about one sample in five (settled lift and swing), so it asks only then."""
+        for about one sample in five (settled lift and swing), so it asks only then. A
+        sample with a NaN value is a hole, and keeps its tag."""
         missing = False
         for v in values:
             if v != v:  # NaN
                 missing = True
-        if missing or (not math.isnan(self._last_t) and t - self._last_t > 1.5 * self.dt):
+        last = self._last_t
+        if last == last and t - last > 1.5 * self.dt:  # a gap not bridged: restart
             self._count = 0
             self.tags.clear()
-        self._last_t = t
+            self._hole[:] = False
+            self._holes = 0
+            self._run = 0
         if missing:
-            return None
+            if self._run >= self.max_gap or last != last:
+                self._count = 0  # too long a hole (or nothing before it)
+                self.tags.clear()
+                self._hole[:] = False
+                self._holes = 0
+                self._run = 0
+                self._last_t = math.nan
+                return None
+            self._run += 1
+            self._last_t = t
+            return self._write(None, tag)
+        self._run = 0
+        self._last_t = t
+        return self._write(values, tag)
+
+    def _write(self, values: tuple[float, ...] | None, tag: T | None) -> T | None:
         w, pos = self.window, self._pos
-        ring = self._ring
-        ring[pos] = values
-        ring[pos + w] = values
+        hole = values is None
+        was = self._hole[pos]
+        if hole or was:
+            if hole:
+                self._ring[pos] = 0.0
+                self._ring[pos + w] = 0.0
+            else:
+                self._ring[pos] = values
+                self._ring[pos + w] = values
+            self._hole[pos] = self._hole[pos + w] = hole
+            self._holes += int(hole) - int(was)
+        else:
+            ring = self._ring
+            ring[pos] = values
+            ring[pos + w] = values
         self._pos = (pos + 1) % w
         self._count += 1
         self.tags.append(tag)
@@ -78,6 +146,26 @@ class FixedLagSavgol(Generic[T]):
 
     def derivatives(self) -> np.ndarray:
         """(3, n_signals) value, rate and acceleration at the centre of the current window
-        (valid after :meth:`push_tag` returned a tag)."""
+        (valid after :meth:`push_tag` returned a tag); fitted to the samples it has when
+        there are holes, NaN when too many are missing."""
         pos = self._pos
-        return self.coeffs @ self._ring[pos:pos + self.window]
+        window = self._ring[pos:pos + self.window]
+        if not self._holes:
+            return self.coeffs @ window
+        mask = self._hole[pos:pos + self.window]
+        if int(mask.sum()) > self.max_holes:
+            return np.full((3, self.n), math.nan)
+        return _masked_coeffs(mask.tobytes(), self.window, self.polyorder, self.dt) @ window
+
+
+@lru_cache(maxsize=256)
+def _masked_coeffs(mask: bytes, window: int, polyorder: int, dt: float) -> np.ndarray:
+    """Centre value, rate and acceleration weights of a window with holes (zero weight on
+    them): the same local polynomial fit, to the samples there are. A gap makes up to
+    ``window`` distinct masks, so the cache keeps a gap's worth and a few more."""
+    keep = ~np.frombuffer(mask, dtype=bool)
+    out = np.zeros((3, window))
+    for k in range(3):
+        out[k, keep] = savgol_coeffs(window, polyorder, deriv=k, delta=dt, use="dot",
+                                     keep=keep)
+    return out

@@ -15,12 +15,14 @@ import numpy as np
 
 
 def savgol_coeffs(window: int, polyorder: int, deriv: int = 0, delta: float = 1.0,
-                  pos: int | None = None, use: str = "conv") -> np.ndarray:
+                  pos: int | None = None, use: str = "conv",
+                  keep: np.ndarray | None = None) -> np.ndarray:
     """Weights that give the ``deriv``-th derivative of the fitted polynomial at ``pos``
     (default: the centre) of a ``window``-sample stretch spaced ``delta`` apart.
 
     ``use="dot"``: to be applied as ``coeffs @ samples`` in time order; ``"conv"``:
-    reversed, for ``np.convolve``.
+    reversed, for ``np.convolve``. ``keep`` (``"dot"`` only): the samples to fit, when
+    some are missing; the weights returned are for those alone.
     """
     if window < 1 or polyorder >= window or deriv > polyorder:
         raise ValueError(f"savgol: window {window}, order {polyorder}, derivative {deriv} "
@@ -30,6 +32,10 @@ def savgol_coeffs(window: int, polyorder: int, deriv: int = 0, delta: float = 1.
     x = np.arange(-pos, window - pos, dtype=float)
     if use == "conv":
         x = x[::-1]
+    elif keep is not None:
+        x = x[keep]
+        if len(x) <= polyorder:
+            raise ValueError(f"savgol: {len(x)} samples kept, need more than order {polyorder}")
     vander = x[None, :] ** np.arange(polyorder + 1)[:, None]
     target = np.zeros(polyorder + 1)
     target[deriv] = math.factorial(deriv) / delta**deriv
