@@ -6,8 +6,8 @@ with a three-state Kalman filter written out on numpy (:class:`Kalman3`): filter
 import pulls in scipy.stats, 0.6-2 s of every daemon start, for a filter whose whole
 algebra is a dozen lines (``bench/filters.py``). The jerk intensity sets the lag/noise
 trade-off (``bench/kinematics_tradeoff.py`` measures it); the default was chosen
-there. The filter coasts through missing samples (predict only) and resets after
-a long gap.
+there. The filter coasts through missing samples and skipped ticks (predict only)
+and resets after a long gap.
 """
 
 from __future__ import annotations
@@ -93,12 +93,22 @@ class JointFilter:
 
     def update(self, t: float, z: float) -> tuple[float, float, float]:
         """Feed the measurement at time t (NaN: missing); return (q, q', q'')."""
-        if self._last_t is None:
+        last = self._last_t
+        if last is None:
             if math.isnan(z):
                 return math.nan, math.nan, math.nan
             self.reset(z)
             self._last_t = t
             return z, 0.0, 0.0
+        missed = round((t - last) / self.dt) - 1
+        if missed > 0:
+            # Ticks the loop skipped (a busy host): predict over them as over missing
+            # samples, or the whole move since the last sample lands in one step and
+            # the rates spike (and the phase machine sees a dig or a swing that is not).
+            for k in range(1, missed + 1):
+                self.update(last + k * self.dt, math.nan)
+                if self._last_t is None:  # coasted too long: restart at this sample
+                    return self.update(t, z)
         self._last_t = t
         if self._steady is not None:
             if z == z:  # not NaN

@@ -83,6 +83,34 @@ def test_joint_filter_matches_filterpy_through_gaps() -> None:
     assert np.all(np.max(np.abs(got - ref), axis=0) <= 1e-6 * scale)
 
 
+def test_a_skipped_tick_is_a_missing_sample_not_a_jump() -> None:
+    """A loaded host skips loop ticks: the samples' times jump. The filter must predict
+    over the skipped ticks (as over NaN samples), not take the move in one step."""
+    dt = 0.01
+    t = np.arange(3000) * dt
+    rng = np.random.default_rng(3)
+    zs = 0.4 * np.sin(0.7 * t) + rng.normal(0, HANDLE.meas_std, len(t))
+    skipped = np.zeros(len(t), bool)
+    skipped[rng.choice(np.arange(500, 3000), 150, replace=False)] = True
+    with_nan = np.where(skipped, np.nan, zs)
+    ref_f = JointFilter(HANDLE, dt)
+    ref = np.array([ref_f.update(float(ti), float(z)) for ti, z in zip(t, with_nan, strict=True)])
+    jf = JointFilter(HANDLE, dt)
+    got = np.array([jf.update(float(t[i]), float(zs[i])) for i in range(len(t))
+                    if not skipped[i]])
+    assert np.allclose(got, ref[~skipped], rtol=0, atol=1e-12)
+    # and the rate error stays the filter's own (the move over a skipped tick, taken in
+    # one step, made it 6.4 times larger: RMS 0.020 rad/s against 0.0031)
+    full_f = JointFilter(HANDLE, dt)
+    full = np.array([full_f.update(float(ti), float(z)) for ti, z in zip(t, zs, strict=True)])
+    rate = 0.4 * 0.7 * np.cos(0.7 * t)
+
+    def rms(x: np.ndarray) -> float:
+        return float(np.sqrt(np.mean(x[500:] ** 2)))
+
+    assert rms(got[:, 1] - rate[~skipped]) < 1.2 * rms(full[:, 1] - rate)
+
+
 def test_kalman3_step_is_filterpys_step() -> None:
     dt = 0.02
     F = np.array([[1.0, dt, 0.5 * dt * dt], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
