@@ -110,6 +110,12 @@ def exclusion_masks(table: SignalsTable, model: Model, cfg: ExclusionConfig,
     static = use & (np.abs(np.degrees(np.nan_to_num(kin.thd))) < cfg.static_rate_deg_s) & (
         np.abs(np.nan_to_num(kin.dd)) < cfg.static_crowd_m_s) & (
         np.abs(np.degrees(np.nan_to_num(kin.thdd))) < cfg.static_acc_deg_s2)
+    # A held pose is still: its rates and accelerations are zero, not the noise the fit
+    # differentiated. Left in, that noise made the Coulomb columns tanh(noise) (up to
+    # +-0.7 on the crowd) where the machine has no friction to show, and pulled the
+    # Coulomb terms 4-6 % low and the viscous ones as much high (docs/engine.md).
+    for name in ("thd", "thdd", "dd", "ddd"):
+        getattr(kin, name)[static] = 0.0
     excluded = Counter(str(r) for r in reasons[~use])
     return FileData(table.source, kin, payload, use, static, excluded)
 

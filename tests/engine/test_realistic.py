@@ -93,14 +93,16 @@ def test_standard_errors_are_honest_over_machines(
     assert abs(e.mean()) < 0.5 * se.mean(), (name, e.mean(), se.mean())
 
 
-@pytest.mark.xfail(strict=True, reason="known: the crowd friction is biased by errors in "
-                   "the estimated rates (+3 and -4 standard errors); see docs/engine.md")
-@pytest.mark.parametrize("name", ("fv4", "fc4"))
-def test_crowd_friction_is_not_yet_unbiased(
+@pytest.mark.parametrize("name", ("fv3", "fc3", "fv4", "fc4"))
+def test_friction_is_unbiased_over_machines(
         machine_runs: list[tuple[Machine, ModelParams]], name: str) -> None:
+    """The friction pairs were biased by 1-4 standard errors (Coulomb low, viscous high;
+    the crowd's pair a strict xfail here) until held poses stopped taking the noise the
+    fit differentiated for motion. Their coverage is the bench's (120 machines: 96-99 %);
+    20 machines measure a share near 95 % too coarsely to hold it to 90 %."""
     e = np.array([p.get(name) - machine_truth(m, p)[name] for m, p in machine_runs])
     se = np.array([float(p.stderr[p.names.index(name)]) for _, p in machine_runs])
-    assert abs(e.mean()) < 0.5 * se.mean()
+    assert abs(e.mean()) < 0.5 * se.mean(), (name, e / se)
 
 
 @pytest.fixture(scope="module")
