@@ -80,6 +80,8 @@ class JointFilter:
         # The piecewise model takes the variance of the acceleration change per step.
         self.kf = Kalman3(F, white_jerk_q(dt, (cfg.jerk_std * dt) ** 2), cfg.meas_std**2)
         self._last_t: float | None = None
+        self._late = 1.5 * dt
+        """A sample later than this after the last one follows skipped ticks."""
         self._coast = 0.0
         self._steady: tuple[float, float, float] | None = None
         self._qva = [0.0, 0.0, 0.0]
@@ -100,8 +102,8 @@ class JointFilter:
             self.reset(z)
             self._last_t = t
             return z, 0.0, 0.0
-        missed = round((t - last) / self.dt) - 1
-        if missed > 0:
+        if t - last > self._late:
+            missed = round((t - last) / self.dt) - 1
             # Ticks the loop skipped (a busy host): predict over them as over missing
             # samples, or the whole move since the last sample lands in one step and
             # the rates spike (and the phase machine sees a dig or a swing that is not).

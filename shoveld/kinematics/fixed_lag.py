@@ -61,6 +61,8 @@ class FixedLagSavgol(Generic[T]):
         self._run = 0
         """Missing samples since the last sample with values."""
         self._last_t = math.nan
+        self.late_t = math.inf
+        """A sample after this time follows missed ticks (ask :meth:`gap`)."""
 
     def push(self, t: float, values: tuple[float, ...], tag: T
              ) -> tuple[T | None, np.ndarray] | None:
@@ -85,6 +87,7 @@ class FixedLagSavgol(Generic[T]):
     def push_hole(self, tag: T | None = None) -> T | None:
         """Advance one tick with no sample; the centre sample's tag as :meth:`push_tag`."""
         self._last_t += self.dt
+        self.late_t = self._last_t + 1.5 * self.dt
         self._run += 1
         return self._write(None, tag)
 
@@ -112,12 +115,15 @@ class FixedLagSavgol(Generic[T]):
                 self._holes = 0
                 self._run = 0
                 self._last_t = math.nan
+                self.late_t = math.inf
                 return None
             self._run += 1
             self._last_t = t
+            self.late_t = t + 1.5 * self.dt
             return self._write(None, tag)
         self._run = 0
         self._last_t = t
+        self.late_t = t + 1.5 * self.dt
         return self._write(values, tag)
 
     def _write(self, values: tuple[float, ...] | None, tag: T | None) -> T | None:
