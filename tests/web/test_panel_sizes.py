@@ -75,5 +75,76 @@ def test_what_the_operator_reads_is_on_the_first_screen(screen: ThreadedScreen, 
         payload_px = b.execute_script(
             "return parseFloat(getComputedStyle(document.getElementById('payload')).fontSize)")
         assert payload_px == max(sizes) and payload_px >= 40, (payload_px, max(sizes))
+        # the fill gauge's 100/110/120 % labels are whole and apart (they ran together
+        # at 1024 px), and inside the page
+        labels = b.execute_script(
+            "return Array.from(document.querySelectorAll('#gauge .mark span')).map(e => {"
+            "const r = e.getBoundingClientRect(); return [e.textContent, r.left, r.top,"
+            " r.right, r.bottom]; })")
+        assert [lab[0] for lab in labels] == ["100%", "110%", "120%"]
+        for i, (_, left, top, right, bottom) in enumerate(labels):
+            assert 0 <= left and right <= inner_w and bottom > top, (width, labels)
+            for _, l2, t2, r2, b2 in labels[i + 1:]:
+                apart = right + 2 <= l2 or r2 + 2 <= left or bottom <= t2 or b2 <= top
+                assert apart, (width, labels)
+    finally:
+        b.quit()
+
+
+@pytest.fixture(scope="module")
+def fleet() -> Iterator[ThreadedScreen]:
+    """Six shovels in the middle of their trucks, each heard every half second."""
+    st = ScreenState()
+    st.set_link("up", "test")
+    ids = [f"shovel-{k:02d}" for k in range(1, 7)]
+    for k, sid in enumerate(ids, 1):
+        st.on_alive(sid, True)
+        st.on_message(sid, "truck", {"truck": 10 + k, "passes": 3, "total_kg": 93000.0 + k,
+                                     "target_kg": 136000.0, "fill_pct": 68.4,
+                                     "status": "under"})
+    stop = threading.Event()
+
+    def feed() -> None:
+        while not stop.is_set():
+            for sid in ids:
+                st.on_alive(sid, True)
+                st.on_message(sid, "payload/live", {"payload_kg": 31234.0, "std_kg": 120.0,
+                                                    "valid": True, "phase": "swing"})
+            stop.wait(0.5)
+
+    feeder = threading.Thread(target=feed, daemon=True)
+    feeder.start()
+    page = ThreadedScreen(st)
+    try:
+        yield page
+    finally:
+        stop.set()
+        feeder.join(2)
+        page.close()
+
+
+@pytest.mark.parametrize(("width", "height"), [(1920, 1080), (1366, 768), (1024, 768)])
+def test_the_office_sees_a_fleet_of_six_on_one_screen(fleet: ThreadedScreen, width: int,
+                                                       height: int) -> None:
+    """The office's screens: every shovel's card whole on the first screen, side by side,
+    nothing cut off or running off the side."""
+    b = open_browser(width, height)
+    try:
+        b.get(fleet.url + "office")
+        assert wait_for(lambda: b.find_element("id", "cards").text.count("31.2 t") == 6, 10.0), \
+            b.find_element("id", "cards").text
+        inner_w, inner_h, scroll_w = b.execute_script(
+            "return [innerWidth, innerHeight, document.documentElement.scrollWidth]")
+        assert scroll_w <= inner_w, (width, scroll_w, inner_w)
+        cards = b.execute_script(
+            "return Array.from(document.querySelectorAll('#cards > *')).map(e => {"
+            "const r = e.getBoundingClientRect(); return [r.left, r.top, r.right, r.bottom,"
+            " e.scrollWidth - e.clientWidth]; })")
+        assert len(cards) == 6
+        for left, top, right, bottom, overflow in cards:
+            assert 0 <= left and right <= inner_w and 0 <= top and bottom <= inner_h, \
+                (width, height, cards)
+            assert overflow <= 0, (width, cards)
+        assert len({round(c[1]) for c in cards}) <= 3  # at least two cards a row
     finally:
         b.quit()
