@@ -136,3 +136,23 @@ def test_what_numpy_would_take_is_still_refused(tmp_path: Path, bad: str, what: 
     lines[k] = ",".join(cells)
     with pytest.raises(SignalsFormatError, match=rf"t\.csv:{k + 1} column 'hoist1_a'.*{what}"):
         read_table("t.csv", "\n".join(lines) + "\n")
+
+
+def test_samples_come_out_row_by_row_across_chunks() -> None:
+    """The rows become Python floats a chunk at a time (memory); every row comes out once,
+    in order, across the chunk edges, NaN (an unknown cell) included."""
+    from shoveld.sample import SAMPLE_CHUNK, samples_from_table
+
+    n = 2 * SAMPLE_CHUNK + 7
+    rng = np.random.default_rng(0)
+    cols = {c: rng.normal(size=n) for c in COLUMN_NAMES}
+    cols["time_s"] = np.arange(n) * 0.02
+    cols["crowd_a"][SAMPLE_CHUNK] = np.nan
+    table = SignalsTable.from_arrays(meta={"sample_rate_hz": "50"}, **cols)
+    got = list(samples_from_table(table))
+    assert len(got) == n
+    for i in (0, SAMPLE_CHUNK - 1, SAMPLE_CHUNK, SAMPLE_CHUNK + 1, n - 1):
+        for c in COLUMN_NAMES:
+            want = float(table.columns[c][i])
+            have = getattr(got[i], c)
+            assert have == want or (np.isnan(want) and np.isnan(have)), (i, c)
