@@ -102,18 +102,10 @@ class FixedLagSavgol(Generic[T]):
                 missing = True
         last = self._last_t
         if last == last and t - last > 1.5 * self.dt:  # a gap not bridged: restart
-            self._count = 0
-            self.tags.clear()
-            self._hole[:] = False
-            self._holes = 0
-            self._run = 0
+            self._restart()
         if missing:
             if self._run >= self.max_gap or last != last:
-                self._count = 0  # too long a hole (or nothing before it)
-                self.tags.clear()
-                self._hole[:] = False
-                self._holes = 0
-                self._run = 0
+                self._restart()  # too long a hole (or nothing before it)
                 self._last_t = math.nan
                 self.late_t = math.inf
                 return None
@@ -125,6 +117,14 @@ class FixedLagSavgol(Generic[T]):
         self._last_t = t
         self.late_t = t + 1.5 * self.dt
         return self._write(values, tag)
+
+    def _restart(self) -> None:
+        """Forget the window: the next samples fill a new one."""
+        self._count = 0
+        self.tags.clear()
+        self._hole[:] = False
+        self._holes = 0
+        self._run = 0
 
     def _write(self, values: tuple[float, ...] | None, tag: T | None) -> T | None:
         w, pos = self.window, self._pos
