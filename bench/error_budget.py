@@ -44,6 +44,8 @@ def variant(machine: Any, name: str) -> Any:
     elif name == "noise-free angles, no drift":
         s = R(s, handle_deg=0.0, crowd_m=0.0, swing_deg=0.0, boom_deg=0.0,
               handle_drift_deg=0.0)
+    elif name == "no handle drift":
+        s = R(s, handle_drift_deg=0.0)
     elif name == "noise-free handle angle":
         s = R(s, handle_deg=0.0)
     elif name == "noise-free crowd extension":
@@ -67,6 +69,7 @@ def variant(machine: Any, name: str) -> Any:
 PAYLOAD_ROWS = (("identified parameters", "all realism", False),
                 ("true parameters", "all realism", True),
                 ("true parameters, noise-free field channel", "noise-free field channel", True),
+                ("true parameters, no handle drift", "no handle drift", True),
                 ("true parameters, noise-free angles", "noise-free angles", True),
                 ("true parameters, noise-free angles, no drift", "noise-free angles, no drift",
                  True))
