@@ -191,13 +191,12 @@ class Engine:
             if settled and self.rls is not None:
                 valid = self._update(s, th, d, sw, thd, dd, swd, thdd, ddd, swdd)
         else:
-            if t > lag.late_t:  # ticks the loop skipped: holes in the window
+            if t - lag.last_t > lag.late:  # ticks the loop skipped: holes in the window
                 for _ in range(lag.gap(t)):
                     valid = self._lagged(lag.push_hole(), ph) or valid
-            tag = lag.push_tag(t, (z_th, z_d, 0.0 if z_sw != z_sw else z_sw),
-                               (s, settled, self._cycle))
-            if tag is not None and tag[1] or tag is None and ph in ESTIMATING:
-                valid = self._lagged(tag, ph) or valid
+            valid = self._lagged(lag.push_tag(
+                t, (z_th, z_d, 0.0 if z_sw != z_sw else z_sw), (s, settled, self._cycle)),
+                ph) or valid
         if self.batch and ph not in ESTIMATING:
             self._flush()
         if self.rls is not None and self.rls.n:

@@ -60,9 +60,10 @@ class FixedLagSavgol(Generic[T]):
         """Beyond this many holes in a window its fit is NaN: too few samples left."""
         self._run = 0
         """Missing samples since the last sample with values."""
-        self._last_t = math.nan
-        self.late_t = math.inf
-        """A sample after this time follows missed ticks (ask :meth:`gap`)."""
+        self.last_t = math.nan
+        """Time of the last tick pushed (NaN: none since a restart)."""
+        self.late = 1.5 * dt
+        """A sample this long after the last tick follows missed ticks (ask :meth:`gap`)."""
 
     def push(self, t: float, values: tuple[float, ...], tag: T
              ) -> tuple[T | None, np.ndarray] | None:
@@ -78,7 +79,7 @@ class FixedLagSavgol(Generic[T]):
         """How many ticks were missed between the last sample and ``t`` that the filter
         will bridge: push that many holes (:meth:`push_hole`) before the sample at ``t``.
         0 when none were missed, or when the gap is too long (the push then restarts)."""
-        last = self._last_t
+        last = self.last_t
         if last != last:
             return 0
         n = round((t - last) / self.dt) - 1
@@ -86,8 +87,7 @@ class FixedLagSavgol(Generic[T]):
 
     def push_hole(self, tag: T | None = None) -> T | None:
         """Advance one tick with no sample; the centre sample's tag as :meth:`push_tag`."""
-        self._last_t += self.dt
-        self.late_t = self._last_t + 1.5 * self.dt
+        self.last_t += self.dt
         self._run += 1
         return self._write(None, tag)
 
@@ -100,22 +100,19 @@ class FixedLagSavgol(Generic[T]):
         for v in values:
             if v != v:  # NaN
                 missing = True
-        last = self._last_t
-        if last == last and t - last > 1.5 * self.dt:  # a gap not bridged: restart
+        last = self.last_t
+        if t - last > self.late:  # a gap not bridged: restart (NaN compares false)
             self._restart()
         if missing:
             if self._run >= self.max_gap or last != last:
                 self._restart()  # too long a hole (or nothing before it)
-                self._last_t = math.nan
-                self.late_t = math.inf
+                self.last_t = math.nan
                 return None
             self._run += 1
-            self._last_t = t
-            self.late_t = t + 1.5 * self.dt
+            self.last_t = t
             return self._write(None, tag)
         self._run = 0
-        self._last_t = t
-        self.late_t = t + 1.5 * self.dt
+        self.last_t = t
         return self._write(values, tag)
 
     def _restart(self) -> None:
@@ -128,21 +125,13 @@ class FixedLagSavgol(Generic[T]):
 
     def _write(self, values: tuple[float, ...] | None, tag: T | None) -> T | None:
         w, pos = self.window, self._pos
+        ring = self._ring
         hole = values is None
+        ring[pos] = ring[pos + w] = 0.0 if hole else values
         was = self._hole[pos]
-        if hole or was:
-            if hole:
-                self._ring[pos] = 0.0
-                self._ring[pos + w] = 0.0
-            else:
-                self._ring[pos] = values
-                self._ring[pos + w] = values
+        if hole or was:  # the holes' bookkeeping, only where one comes or goes
             self._hole[pos] = self._hole[pos + w] = hole
             self._holes += int(hole) - int(was)
-        else:
-            ring = self._ring
-            ring[pos] = values
-            ring[pos + w] = values
         self._pos = (pos + 1) % w
         self._count += 1
         self.tags.append(tag)

@@ -18,23 +18,17 @@ from tests.daemon.conftest import wait_for
 AT_A_GLANCE = ("payload", "truck-total", "remaining", "hint")
 
 
-@pytest.fixture(scope="module")
-def screen() -> Iterator[ThreadedScreen]:
-    """A shovel in the middle of a truck, kept alive by a message every half second."""
-    st = ScreenState()
-    st.set_link("up", "test")
-    st.on_alive("s1", True)
-    st.on_message("s1", "truck", {"truck": 4, "passes": 3, "total_kg": 93000.0,
-                                  "target_kg": 136000.0, "fill_pct": 68.4, "status": "under"})
-    for i in range(3):
-        st.on_message("s1", "pass", {"pass": i + 1, "truck": 4, "payload_kg": 31000.0,
-                                     "std_kg": 110.0, "valid": True, "end": time.time()})
+def served(st: ScreenState, shovels: list[str]) -> Iterator[ThreadedScreen]:
+    """The pages of ``st``, each shovel heard from every half second with a live payload
+    of 31.2 t in the swing (a screen with nothing new marks a shovel silent)."""
     stop = threading.Event()
 
     def feed() -> None:
         while not stop.is_set():
-            st.on_message("s1", "payload/live", {"payload_kg": 31234.0, "std_kg": 120.0,
-                                                 "valid": True, "phase": "swing"})
+            for sid in shovels:
+                st.on_alive(sid, True)
+                st.on_message(sid, "payload/live", {"payload_kg": 31234.0, "std_kg": 120.0,
+                                                    "valid": True, "phase": "swing"})
             stop.wait(0.5)
 
     feeder = threading.Thread(target=feed, daemon=True)
@@ -46,6 +40,20 @@ def screen() -> Iterator[ThreadedScreen]:
         stop.set()
         feeder.join(2)
         page.close()
+
+
+@pytest.fixture(scope="module")
+def screen() -> Iterator[ThreadedScreen]:
+    """A shovel in the middle of a truck, kept alive by a message every half second."""
+    st = ScreenState()
+    st.set_link("up", "test")
+    st.on_alive("s1", True)
+    st.on_message("s1", "truck", {"truck": 4, "passes": 3, "total_kg": 93000.0,
+                                  "target_kg": 136000.0, "fill_pct": 68.4, "status": "under"})
+    for i in range(3):
+        st.on_message("s1", "pass", {"pass": i + 1, "truck": 4, "payload_kg": 31000.0,
+                                     "std_kg": 110.0, "valid": True, "end": time.time()})
+    yield from served(st, ["s1"])
 
 
 @pytest.mark.parametrize(("width", "height"), [(1280, 800), (1024, 600), (800, 480)])
@@ -102,25 +110,7 @@ def fleet() -> Iterator[ThreadedScreen]:
         st.on_message(sid, "truck", {"truck": 10 + k, "passes": 3, "total_kg": 93000.0 + k,
                                      "target_kg": 136000.0, "fill_pct": 68.4,
                                      "status": "under"})
-    stop = threading.Event()
-
-    def feed() -> None:
-        while not stop.is_set():
-            for sid in ids:
-                st.on_alive(sid, True)
-                st.on_message(sid, "payload/live", {"payload_kg": 31234.0, "std_kg": 120.0,
-                                                    "valid": True, "phase": "swing"})
-            stop.wait(0.5)
-
-    feeder = threading.Thread(target=feed, daemon=True)
-    feeder.start()
-    page = ThreadedScreen(st)
-    try:
-        yield page
-    finally:
-        stop.set()
-        feeder.join(2)
-        page.close()
+    yield from served(st, ids)
 
 
 @pytest.mark.parametrize(("width", "height"), [(1920, 1080), (1366, 768), (1024, 768)])
