@@ -21,7 +21,7 @@ from shoveld.kinematics import DEFAULT_POLYORDER, LEGACY_POLYORDER, LEGACY_WINDO
 from shoveld.kinematics.causal import CROWD, HANDLE, SWING, JointFilter
 from shoveld.kinematics.fixed_lag import FixedLagSavgol
 from shoveld.model.kin import Kinematics
-from shoveld.model.output import CurrentEquations, noise_sigma
+from shoveld.model.output import CurrentEquations, current_sigma
 from shoveld.model.params import ModelParams
 from shoveld.payload.rls import PayloadRls, RlsConfig
 from shoveld.payload.trucks import Truck
@@ -233,10 +233,9 @@ class Engine:
             self.pass_index += 1
             self._cycle += 1
             self.pass_start = t
-            tau = None
-            if self.current_noise:
-                tau = (self.current_noise["hoist"]["tau"], self.current_noise["crowd"]["tau"])
-            self.rls = PayloadRls(self.noise, self.dt, self.cfg.rls, tau=tau)
+            # the payload's scores are correlated over the angles' smoothing window
+            lag = round(self.window_s / self.dt) if self.current_noise else 0
+            self.rls = PayloadRls(self.noise, self.dt, self.cfg.rls, hac_lag=lag)
             self._cached = (-1, math.nan, math.nan)
             self.batch.clear()
             self.invalid_updates = 0
@@ -314,7 +313,7 @@ class Engine:
             # weighted by its channel's noise at its reading (shoveld.model.output).
             ce = CurrentEquations(self.model, k)
             a, b = ce.payload_equations(self.p)
-            sig = noise_sigma(self.current_noise, ce.currents(), ce.acc)
+            sig = current_sigma(self.current_noise, ce, self.p)
             ok = np.isfinite(a).all(axis=1) & np.isfinite(b).all(axis=1)
             if not ok.all():
                 a, b, sig = a[ok], b[ok], sig[ok]

@@ -78,6 +78,18 @@ class Model:
                 phi = phi + extra_phi(k)
         return w_all, phi, psi_all
 
+    def column_spread(self, k: Kinematics) -> np.ndarray:
+        """(N, 2, P): each column's standard deviation about its value (zero for the
+        columns the kinematics determine; see ``Term.column_spread``)."""
+        out = np.zeros((len(k), 2, len(self.param_names)))
+        j = 0
+        for t in self.terms:
+            s = t.column_spread(k)
+            if s is not None:
+                out[:, :, j:j + len(t.params)] = s
+            j += len(t.params)
+        return out
+
     def current_derivatives(self, k: Kinematics) -> tuple[np.ndarray, np.ndarray]:
         """d W / d i_H and d W / d i_C, each (N, 2, P): how the residual of each equation
         moves per ampere of measured hoist and crowd current, per unit of each parameter

@@ -50,6 +50,10 @@ class CurrentEquations:
         self.i_h = k.i_h
         self.i_c = k.i_c
         self.acc = np.stack([k.thdd, k.ddd], axis=-1)
+        spread = model.column_spread(k)
+        self.spread0 = np.ascontiguousarray(spread[:, 0, :])
+        self.spread1 = np.ascontiguousarray(spread[:, 1, :])
+        self.has_spread = bool(np.any(spread))
         self._gain_cache: tuple[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
 
     def __len__(self) -> int:
@@ -114,6 +118,18 @@ class CurrentEquations:
             jac[:, 1, self.offsets[1]] -= 1.0
         return jac
 
+    def model_variance(self, p: np.ndarray) -> np.ndarray:
+        """(N, 2) A^2: the variance of each channel's predicted current that comes from
+        the model's own uncertain columns (``Model.column_spread``: the friction's sign
+        near standstill), taken as independent between columns."""
+        if not self.has_spread:
+            return np.zeros((len(self), 2))
+        g_h, c, g_c = self._gains(p)
+        s0 = self.spread0 * p
+        s1 = self.spread1 * p + c[:, None] * s0
+        return np.stack([np.sum(s0 * s0, axis=1) / g_h**2,
+                         np.sum(s1 * s1, axis=1) / g_c**2], axis=-1)
+
     def currents(self) -> np.ndarray:
         """(N, 2) the measured hoist (sum) and crowd currents these equations explain."""
         return np.stack([self.i_h, self.i_c], axis=-1)
@@ -148,3 +164,11 @@ def noise_sigma(noise: dict[str, dict[str, float]] | None, i: np.ndarray, acc: n
         coef = np.array([n["floor_a"], n["rel"], n["handle_acc_a"], n["crowd_acc_a"]]) ** 2
         out[:, j] = np.sqrt(reg[:, j] @ coef)
     return out
+
+
+def current_sigma(noise: dict[str, dict[str, float]] | None, ce: CurrentEquations,
+                  p: np.ndarray) -> np.ndarray:
+    """(N, 2) each sample's std per channel: the calibration's noise model and what the
+    model itself does not know there (``CurrentEquations.model_variance``)."""
+    sig = noise_sigma(noise, ce.currents(), ce.acc)
+    return np.sqrt(sig * sig + ce.model_variance(p))

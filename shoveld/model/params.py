@@ -41,8 +41,9 @@ class ModelParams:
     fit: dict[str, Any] = field(default_factory=dict)
     current_noise: dict[str, dict[str, float]] = field(default_factory=dict)
     """Per current channel (hoist, crowd): the noise model by which the payload filter
-    weights each sample, and the residuals' correlation time by which it widens its std
-    (keys ``shoveld.model.output.NOISE_KEYS``)."""
+    weights each sample, and the calibration residuals' correlation time, a record for
+    the field engineer (a pass's std comes from its own residuals; keys
+    ``shoveld.model.output.NOISE_KEYS``)."""
 
     def model(self) -> Model:
         m = Model.from_names([t for t in self.terms], self.hyper)

@@ -130,3 +130,26 @@ def test_every_pass_has_a_payload_when_the_field_weakens(
     assert np.all(np.abs(err) < 4 * std)
     assert np.all((crb > 10) & (crb < 200))  # "a few tens of kg" per pass
     assert np.sqrt(np.mean(err**2)) < 3 * crb.mean()
+
+
+def test_friction_near_standstill_does_not_pull_the_payload(
+        fast_lifts: tuple[SimResult, ModelParams], monkeypatch: pytest.MonkeyPatch) -> None:
+    """The simulated machine's Coulomb friction switches over a narrower band of speed
+    than the model's smoothed sign (real friction is its own shape: stiction, the Stribeck
+    dip). Where a joint passes through standstill in swing the model's friction is then
+    wrong by up to fc for several samples. Weighting those samples by the sign's own
+    uncertainty (``Friction.column_spread``) must take most of that pull out."""
+    from shoveld.model.terms import Friction
+
+    res, p = fast_lifts
+
+    def rms() -> float:
+        est = estimate_table(res.table, p)
+        err = [q.payload_kg - tp.payload_kg for q, tp in zip(est.passes, res.passes,
+                                                              strict=True)]
+        return float(np.sqrt(np.mean(np.square(err))))
+
+    weighted = rms()
+    monkeypatch.setattr(Friction, "column_spread", lambda self, k: None)
+    unweighted = rms()
+    assert weighted < 0.85 * unweighted, (weighted, unweighted)

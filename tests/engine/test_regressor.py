@@ -7,6 +7,8 @@ vector geometry. A sign or factor error in any term of the regressor fails it.
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -129,3 +131,26 @@ def test_the_field_curve_goes_on_along_its_slope_just_above_the_nominal() -> Non
     # params identified with the flat curve keep it
     flat = field_basis(x, knots, slope_above=False) @ y
     assert flat[3] == pytest.approx(flat[1]) and flat[0] < flat[1]
+
+
+def test_the_friction_sign_is_uncertain_at_standstill_only() -> None:
+    """Each channel's model variance is (fc over the current's gain)^2 where a joint
+    stands still, sech^2 of the rate over the sign's width near it, and vanishes a few
+    widths away."""
+    from shoveld.model.output import CurrentEquations
+    from shoveld.model.terms import SIGN_EPS_D
+
+    t = np.linspace(1, 2, 3)
+    k = kin_at(t, np.full(3, 500.0), np.full(3, 50.0), np.radians(45))
+    k = dataclasses.replace(k, thd=np.full(3, 0.2),
+                            dd=np.array([0.0, SIGN_EPS_D, 8 * SIGN_EPS_D]))
+    model = Model.from_names()
+    fc4 = 1.5e4
+    p = np.array([MD, MD * LC, KH, KC, IZZ + MD * LC**2, FV3, 3e4, FV4, fc4, 0.0, 0.0])
+    ce = CurrentEquations(model, k)
+    var = ce.model_variance(p)
+    g_c = ce.dc1 @ p
+    assert var[0, 1] == pytest.approx((fc4 / g_c[0]) ** 2, rel=1e-6)
+    assert var[1, 1] == pytest.approx((fc4 / g_c[1]) ** 2 / np.cosh(1.0) ** 2, rel=1e-6)
+    assert var[2, 1] < 1e-5 * var[0, 1]
+    assert np.all(var[:, 0] < 1e-9 * var[0, 1])  # the handle moves: its sign is known
