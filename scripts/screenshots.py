@@ -1,7 +1,7 @@
 """Screenshots of the cab and office pages in their main states, for docs/screens/.
 
 The pages are fed a fixed sequence of the daemon's messages (so the pictures are the
-same every time) and shot in headless Chromium at the cab panel's 1280 x 800.
+same every time) and shot in headless Chromium at the cab panel's 1280 x 800 (one also at 1024 x 600).
 
     .venv/bin/python scripts/screenshots.py [--out docs/screens]
 """
@@ -57,9 +57,10 @@ def feed(st: ScreenState, shovel: str, done: list[list[float]], current: list[fl
     st.on_message(shovel, "health", {"problems": problems, "ok": not problems})
 
 
-def shoot(name: str, st: ScreenState, out: Path, path: str = "", night: bool = False) -> None:
+def shoot(name: str, st: ScreenState, out: Path, path: str = "", night: bool = False,
+          size: tuple[int, int] = (1280, 800)) -> None:
     page = ThreadedScreen(st)
-    b = open_browser()
+    b = open_browser(*size)
     try:
         b.get(page.url + path)
         if night:
@@ -97,6 +98,7 @@ def main() -> None:
     feed(st, "ph4100-07", done, [33400.0, 34700.0, 34100.0, 34900.0, 20100.0], None, "return",
          [])
     shoot("cab-overload", st, out)
+    shoot("cab-1024x600", st, out, size=(1024, 600))
     st = ScreenState()
     st.set_link("up", "tcp/127.0.0.1:7447")
     feed(st, "ph4100-07", done, [33400.0], None, "lift",

@@ -100,6 +100,76 @@ def test_what_the_operator_reads_is_on_the_first_screen(screen: ThreadedScreen, 
 
 
 @pytest.fixture(scope="module")
+def full_screen() -> Iterator[ThreadedScreen]:
+    """A shift's worth on the screen: five closed trucks, five passes in an over-loaded
+    truck with its hint and warning, the arm, a missing sensor in the health strip."""
+    st = ScreenState()
+    st.set_link("up", "test")
+    st.on_alive("s1", True)
+    n = 0
+    for k in range(1, 6):
+        for _ in range(4):
+            n += 1
+            st.on_message("s1", "pass", {"pass": n, "truck": k, "payload_kg": 33000.0,
+                                         "std_kg": 300.0, "valid": True})
+        st.on_message("s1", "truck", {"truck": k, "passes": 4, "total_kg": 132000.0,
+                                      "target_kg": 136000.0, "fill_pct": 97.1,
+                                      "status": "ok", "closed": True, "rule_10_10_20": {
+                                          "trucks": k, "mean_pct": 97.1, "over_110_pct": 0.0,
+                                          "over_120": 0, "compliant": True}})
+    loads = [33400.0, 34700.0, 34100.0, 34900.0, 20100.0]
+    for i, p in enumerate(loads):
+        n += 1
+        st.on_message("s1", "pass", {"pass": n, "truck": 6, "payload_kg": p,
+                                     "std_kg": 300.0, "valid": True})
+        total = sum(loads[:i + 1])
+        st.on_message("s1", "truck", {"truck": 6, "passes": i + 1, "total_kg": total,
+                                      "target_kg": 136000.0,
+                                      "fill_pct": round(100 * total / 136000.0, 1),
+                                      "status": "over_110" if total > 149600 else "under"})
+    st.on_message("s1", "joints", {"handle_deg": 18.0, "crowd_m": 9.1, "boom_deg": 45.0,
+                                   "swing_deg": 82.0, "invalid": []})
+    st.on_message("s1", "health", {"problems": ["laser: no reading for 3.0 s"], "ok": False})
+    yield from served(st, ["s1"])
+
+
+@pytest.mark.parametrize(("width", "height"), [(1280, 800), (1024, 600)])
+def test_a_ten_inch_panel_shows_the_whole_cab_page_without_scrolling(
+        full_screen: ThreadedScreen, width: int, height: int) -> None:
+    """On the 10-inch panels (1280 x 800, 1024 x 600) the operator does not scroll with
+    gloves on: the dipper, the truck, this truck's passes, the last trucks, the shift's
+    10/10/20 line and the arm are all whole on the screen (at 800 x 480, a 7-inch panel,
+    only what is read at a glance is, as the test above holds)."""
+    b = open_browser(width, height)
+    try:
+        b.get(full_screen.url)
+        assert wait_for(lambda: b.find_element("id", "passes").text.count("\n") == 4, 10.0)
+        assert wait_for(lambda: "10/10/20 rule" in b.find_element("id", "shift").text, 10.0), \
+            b.find_element("id", "shift").text
+        inner_w, inner_h, scroll_w, scroll_h = b.execute_script(
+            "const d = document.documentElement;"
+            "return [innerWidth, innerHeight, d.scrollWidth, d.scrollHeight]")
+        assert scroll_w <= inner_w and scroll_h <= inner_h, (width, height, scroll_w, scroll_h)
+        boxes = b.execute_script(
+            "return ['payload', 'gauge', 'warning', 'passes', 'trucks', 'shift', 'arm', "
+            "'joints', 'health'].map(id => { const e = document.getElementById(id);"
+            "const r = e.getBoundingClientRect(); let p = e.parentElement, cut = false;"
+            "while (p) { const q = p.getBoundingClientRect();"
+            " if (getComputedStyle(p).overflowY !== 'visible' &&"
+            " (r.bottom > q.bottom + 1 || r.top < q.top - 1)) cut = true; p = p.parentElement; }"
+            "return [id, r.left, r.top, r.right, r.bottom, cut]; })")
+        for name, left, top, right, bottom, cut in boxes:
+            assert bottom > top and 0 <= left and right <= inner_w and bottom <= inner_h, \
+                (width, height, name, left, top, right, bottom)
+            assert not cut, (width, height, name, "cut off by a scrolling panel")
+        rows = b.execute_script("return document.querySelectorAll('#trucks tr').length")
+        assert rows == 5
+        assert b.find_element("id", "warning").text.startswith("Over 110 %")
+    finally:
+        b.quit()
+
+
+@pytest.fixture(scope="module")
 def fleet() -> Iterator[ThreadedScreen]:
     """Six shovels in the middle of their trucks, each heard every half second."""
     st = ScreenState()
