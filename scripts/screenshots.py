@@ -1,7 +1,8 @@
 """Screenshots of the cab and office pages in their main states, for docs/screens/.
 
 The pages are fed a fixed sequence of the daemon's messages (so the pictures are the
-same every time) and shot in headless Chromium at the cab panel's 1280 x 800 (one also at 1024 x 600).
+same every time) and shot in headless Chromium at the cab panel's 1280 x 800 (one also
+at 1024 x 600).
 
     .venv/bin/python scripts/screenshots.py [--out docs/screens]
 """
