@@ -24,6 +24,7 @@ class Model:
         self.terms: list[Term] = list(terms)
         self.param_names: list[str] = [p for t in self.terms for p in t.params]
         self.param_units: list[str] = [u for t in self.terms for u in t.units]
+        self._spread_terms = [t for t in self.terms if t.spread_params]
 
     @classmethod
     def from_names(cls, effects: Iterable[str] = (),
@@ -78,17 +79,17 @@ class Model:
                 phi = phi + extra_phi(k)
         return w_all, phi, psi_all
 
-    def column_spread(self, k: Kinematics) -> np.ndarray:
-        """(N, 2, P): each column's standard deviation about its value (zero for the
-        columns the kinematics determine; see ``Term.column_spread``)."""
-        out = np.zeros((len(k), 2, len(self.param_names)))
-        j = 0
-        for t in self.terms:
-            s = t.column_spread(k)
-            if s is not None:
-                out[:, :, j:j + len(t.params)] = s
-            j += len(t.params)
-        return out
+    def column_spread(self, k: Kinematics) -> tuple[np.ndarray, np.ndarray]:
+        """The columns the kinematics do not determine (``Term.spread_params``): their
+        parameter indices (K,) and standard deviations (N, 2, K)."""
+        idx: list[int] = []
+        parts = []
+        for t in self._spread_terms:
+            idx.extend(self.param_names.index(n) for n in t.spread_params)
+            parts.append(t.column_spread(k))
+        if not parts:
+            return np.zeros(0, dtype=int), np.zeros((len(k), 2, 0))
+        return np.asarray(idx, dtype=int), np.concatenate(parts, axis=2)
 
     def current_derivatives(self, k: Kinematics) -> tuple[np.ndarray, np.ndarray]:
         """d W / d i_H and d W / d i_C, each (N, 2, P): how the residual of each equation

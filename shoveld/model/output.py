@@ -50,10 +50,9 @@ class CurrentEquations:
         self.i_h = k.i_h
         self.i_c = k.i_c
         self.acc = np.stack([k.thdd, k.ddd], axis=-1)
-        spread = model.column_spread(k)
+        self.spread_idx, spread = model.column_spread(k)
         self.spread0 = np.ascontiguousarray(spread[:, 0, :])
         self.spread1 = np.ascontiguousarray(spread[:, 1, :])
-        self.has_spread = bool(np.any(spread))
         self._gain_cache: tuple[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
 
     def __len__(self) -> int:
@@ -122,11 +121,12 @@ class CurrentEquations:
         """(N, 2) A^2: the variance of each channel's predicted current that comes from
         the model's own uncertain columns (``Model.column_spread``: the friction's sign
         near standstill), taken as independent between columns."""
-        if not self.has_spread:
+        if not len(self.spread_idx):
             return np.zeros((len(self), 2))
         g_h, c, g_c = self._gains(p)
-        s0 = self.spread0 * p
-        s1 = self.spread1 * p + c[:, None] * s0
+        ps = p[self.spread_idx]
+        s0 = self.spread0 * ps
+        s1 = self.spread1 * ps + c[:, None] * s0
         return np.stack([np.sum(s0 * s0, axis=1) / g_h**2,
                          np.sum(s1 * s1, axis=1) / g_c**2], axis=-1)
 

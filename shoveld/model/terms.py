@@ -69,10 +69,13 @@ class Term:
         depend on the payload."""
         return None
 
-    def column_spread(self, k: Kinematics) -> np.ndarray | None:
-        """(N, 2, P): the standard deviation of each column about its value, for columns
-        the kinematics do not determine (None: all are exact)."""
-        return None
+    spread_params: ClassVar[tuple[str, ...]] = ()
+    """Parameters whose columns the kinematics do not determine (see ``column_spread``)."""
+
+    def column_spread(self, k: Kinematics) -> np.ndarray:
+        """(N, 2, len(spread_params)): the standard deviation of those parameters' columns
+        about their values."""
+        return np.zeros((len(k), 2, 0))
 
     def current_derivative(self, k: Kinematics) -> tuple[np.ndarray, np.ndarray] | None:
         """Derivatives of the columns by the measured hoist and crowd currents, for terms
@@ -335,6 +338,8 @@ class Friction(Term):
         return _stack((k.thd, z), (smooth_sign(k.thd, SIGN_EPS_TH), z),
                       (z, k.dd), (z, smooth_sign(k.dd, SIGN_EPS_D)))
 
+    spread_params = ("fc3", "fc4")
+
     def column_spread(self, k: Kinematics) -> np.ndarray:
         """Near standstill the Coulomb friction's sign is not known: real friction
         (stiction, the Stribeck dip, pre-sliding) and a rate estimated from noisy angles
@@ -342,8 +347,7 @@ class Friction(Term):
         as the sign's expected value; a sign of +-1 with that mean has standard deviation
         sech(v / eps), 1 at standstill and under 0.04 beyond four widths."""
         z = np.zeros_like(k.thd)
-        return _stack((z, z), (_sech(k.thd / SIGN_EPS_TH), z),
-                      (z, z), (z, _sech(k.dd / SIGN_EPS_D)))
+        return _stack((_sech(k.thd / SIGN_EPS_TH), z), (z, _sech(k.dd / SIGN_EPS_D)))
 
 
 @register_term

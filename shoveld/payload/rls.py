@@ -50,6 +50,7 @@ class PayloadRls:
         # final m goes in at the end; the last hac_lag rows carry lags across blocks.
         self._hac = np.zeros(3)
         self._tail = np.zeros((0, 2))
+        self._weights: np.ndarray | None = None
         self.dt = dt
         self.r_diag = np.square(np.asarray(noise, dtype=float))
         self.x = self.cfg.prior_kg
@@ -116,20 +117,20 @@ class PayloadRls:
 
     def _hac_add(self, uc: np.ndarray) -> None:
         """Add a block's (u, c) rows to the Newey-West sums: lag 0, and each lag up to
-        ``hac_lag`` with its Bartlett weight, pairing every new row with those before."""
+        ``hac_lag`` with its Bartlett weight, pairing every new row with those before
+        (the rows before a pass's first are zeros, which add nothing)."""
         lag = self.hac_lag
+        if self._weights is None:
+            # kernel of a 'valid' convolution: 0 at lag 0, then lag 1..L's weights
+            self._weights = np.concatenate([[0.0], 2.0 * (1.0 - np.arange(1, lag + 1) / (lag + 1))])
+            self._tail = np.zeros((lag, 2))
         rows = np.vstack([self._tail, uc])
-        first = len(self._tail)
-        u, c = rows[:, 0], rows[:, 1]
-        un, cn = u[first:], c[first:]
-        acc = np.array([un @ un, un @ cn, cn @ cn])
-        n = len(rows)
-        for j in range(1, min(lag, n - 1) + 1):
-            lo = max(first, j)  # the later row of each pair is new
-            w = 2.0 * (1.0 - j / (lag + 1))
-            ul, cl, uh, ch = u[lo - j:n - j], c[lo - j:n - j], u[lo:], c[lo:]
-            acc += w * np.array([uh @ ul, 0.5 * (uh @ cl + ch @ ul), ch @ cl])
-        self._hac += acc
+        u, c = uc[:, 0], uc[:, 1]
+        # for each new row, the Bartlett-weighted sum of the lag rows before it
+        bu = np.convolve(rows[:, 0], self._weights, "valid")
+        bc = np.convolve(rows[:, 1], self._weights, "valid")
+        self._hac += np.array([u @ u + u @ bu, u @ c + 0.5 * (u @ bc + c @ bu),
+                               c @ c + c @ bc])
         self._tail = rows[-lag:]
 
     def hac_std_kg(self) -> float:
