@@ -49,8 +49,10 @@ class PayloadRls:
         # c = sum a a / var, over the two channels), kept as products of u and c so the
         # final m goes in at the end; the last hac_lag rows carry lags across blocks.
         self._hac = np.zeros(3)
-        self._tail = np.zeros((0, 2))
-        self._weights: np.ndarray | None = None
+        self._tail = np.zeros((self.hac_lag, 2))
+        # kernel of a 'valid' convolution: 0 at lag 0, then lag 1..L's Bartlett weights
+        self._weights = np.concatenate(
+            [[0.0], 2.0 * (1.0 - np.arange(1, self.hac_lag + 1) / (self.hac_lag + 1))])
         self.dt = dt
         self.r_diag = np.square(np.asarray(noise, dtype=float))
         self.x = self.cfg.prior_kg
@@ -89,41 +91,41 @@ class PayloadRls:
         # y' S^-1 y = y' R^-1 y - (a' R^-1 y)^2 / (1/p + a' R^-1 a).
         y = b - a * self.x
         wa = a / var
-        info = float(np.sum(wa * a))
+        waa = wa * a
+        info = float(np.sum(waa))
         ay = float(np.sum(wa * y))
         prec = 1.0 / p + info
         self.p = 1.0 / prec
         self.x += ay / prec
         self._nis_sum += float(np.sum(y * y / var)) - ay * ay / prec
         self._nis_dof += 2 * n
-        nu = y / np.sqrt(var)
+        self._info += np.sum(waa, axis=0)
+        if self.hac_lag > 0:
+            self._hac_add(np.stack([np.sum(wa * b, axis=1), np.sum(waa, axis=1)], axis=1))
+        else:
+            self._lag1(y / np.sqrt(var))
+        if db_dp is not None:
+            self._s_aa += info
+            s = np.einsum("ke,kep->p", wa, np.asarray(db_dp))
+            self._s_adb = s if self._s_adb is None else self._s_adb + s
+        self.n += n
+
+    def _lag1(self, nu: np.ndarray) -> None:
+        """Add a block's normalised innovations to their lag-1 correlation sums."""
         last = nu[-1]
         if self._prev_nu is not None:
             nu_prev = np.vstack([self._prev_nu[None, :], nu[:-1]])
         else:
             nu_prev = nu[:-1]
-            nu = nu[1:] if n > 1 else nu[:0]
+            nu = nu[1:]
         self._corr_num += float(np.sum(nu * nu_prev))
         self._corr_den += float(np.sum(nu * nu))
         self._prev_nu = last
-        self._info += np.sum(a * a / var, axis=0)
-        if self.hac_lag > 0:
-            self._hac_add(np.stack([np.sum(wa * b, axis=1), np.sum(wa * a, axis=1)], axis=1))
-        if db_dp is not None:
-            self._s_aa += float(np.sum(wa * a))
-            s = np.einsum("ke,kep->p", wa, np.asarray(db_dp))
-            self._s_adb = s if self._s_adb is None else self._s_adb + s
-        self.n += n
 
     def _hac_add(self, uc: np.ndarray) -> None:
         """Add a block's (u, c) rows to the Newey-West sums: lag 0, and each lag up to
         ``hac_lag`` with its Bartlett weight, pairing every new row with those before
         (the rows before a pass's first are zeros, which add nothing)."""
-        lag = self.hac_lag
-        if self._weights is None:
-            # kernel of a 'valid' convolution: 0 at lag 0, then lag 1..L's weights
-            self._weights = np.concatenate([[0.0], 2.0 * (1.0 - np.arange(1, lag + 1) / (lag + 1))])
-            self._tail = np.zeros((lag, 2))
         rows = np.vstack([self._tail, uc])
         u, c = uc[:, 0], uc[:, 1]
         # for each new row, the Bartlett-weighted sum of the lag rows before it
@@ -131,7 +133,7 @@ class PayloadRls:
         bc = np.convolve(rows[:, 1], self._weights, "valid")
         self._hac += np.array([u @ u + u @ bu, u @ c + 0.5 * (u @ bc + c @ bu),
                                c @ c + c @ bc])
-        self._tail = rows[-lag:]
+        self._tail = rows[-self.hac_lag:]
 
     def hac_std_kg(self) -> float:
         """The Newey-West std of the estimate, from this pass's own scores."""
