@@ -7,14 +7,17 @@ Per parser it counts:
 * corruptions accepted: for the MTi (Xbus), a frame corrupted in 1-4 bytes whose
   reading reaches the loop with values that differ from the clean frame's. The Xbus
   checksum is one byte, so about 1 in 256 such frames pass it: the driver stops them
-  with what the frame already carries (the configured items, the packet counter and
-  sample time advancing together, values in range, angles that cannot jump). What
-  still gets through is a change in the low bits of a float; the bench also counts
-  those that move an angle by more than 0.01 deg. The AR4000's ASCII protocol has no
+  with what the frame already carries (the configured items, Euler angles that agree
+  with the packet's quaternion, the packet counter and sample time advancing together,
+  values in range, angles that cannot jump). ``xbus`` is the MTi sending both
+  orientations (the default), ``xbus-euler`` Euler angles alone (as before 2026-11-26).
+  What still gets through is a change in the rate of turn, the acceleration or the
+  status word (which the loop does not use) or in an angle's low bits; the bench also
+  counts those that move an angle by more than 0.01 deg. The AR4000's ASCII protocol has no
   checksum at all, so a mutated digit is a valid distance: its count is printed for
   what it is.
 
-    .venv/bin/python bench/fuzz.py [--parser all|xbus|ar4000|modbus|table|capture]
+    .venv/bin/python bench/fuzz.py [--parser all|xbus|xbus-euler|ar4000|modbus|table|capture]
                                    [--n 1000000] [--seed 1]
 
 Goal (issue 12): 0 crashes, 0 hangs, 0 corrupted MTi frames accepted.
@@ -88,16 +91,25 @@ class Tally:
 ANGLES = ("roll_deg", "pitch_deg", "yaw_deg")
 
 
-def fuzz_xbus(n: int, rng: random.Random, t: Tally) -> None:
-    """Corrupt one MTData2 frame between two clean ones; parse and decode as the driver."""
+def fuzz_xbus(n: int, rng: random.Random, t: Tally, orientation: str = "euler+quaternion"
+              ) -> None:
+    """Corrupt one MTData2 frame between two clean ones; parse and decode as the driver
+    configured for ``orientation``. The committed capture's MTi sent Euler angles alone;
+    for the default (both) each of its packets gets the quaternion of its own Euler
+    angles, as the emulator and a real device send it."""
     from drivers.base import Reading
+    from drivers.xsens.mtdata2 import XDI, encode_item, mtdata2_values
+    from drivers.xsens.orientation import euler_deg_to_quat
     from drivers.xsens.serial_driver import MtiSerialDriver
-    from drivers.xsens.xbus import XbusParser, encode_frame
+    from drivers.xsens.xbus import XbusMessage, XbusParser, encode_frame
 
     p = XbusParser()
     msgs = [m for m in p.feed(rx_bytes("mti.serial.jsonl")) if m.mid == 0x36]
+    if orientation == "euler+quaternion":
+        msgs = [XbusMessage(m.mid, m.data + encode_item(XDI.QUATERNION, euler_deg_to_quat(
+            *mtdata2_values(m.data)[XDI.EULER_ANGLES]))) for m in msgs]
     frames = [encode_frame(m.mid, m.data) for m in msgs]
-    drv = MtiSerialDriver.from_config({"port": "/dev/null"})
+    drv = MtiSerialDriver.from_config({"port": "/dev/null", "orientation": orientation})
     clean: list[dict[str, float]] = []
     for m in msgs:
         r = drv.decode(m.data)
@@ -220,7 +232,7 @@ def fuzz_modbus(n: int, rng: random.Random, t: Tally) -> None:
         t.run(one, ())
 
 
-PARSERS = ("xbus", "ar4000", "modbus", "table", "capture")
+PARSERS = ("xbus", "xbus-euler", "ar4000", "modbus", "table", "capture")
 
 
 def main() -> None:
@@ -238,10 +250,12 @@ def main() -> None:
         rng = random.Random(args.seed)
         t = Tally(name, args.hang_s)
         t0 = time.perf_counter()
-        if name == "xbus":
-            fuzz_xbus(args.n, rng, t)
+        if name.startswith("xbus"):
+            fuzz_xbus(args.n, rng, t, "euler" if name == "xbus-euler" else "euler+quaternion")
             note = ("readings from corrupted frames that reached the loop; 'of': corrupted "
-                    "frames that passed the checksum")
+                    "frames that passed the checksum; MTi sending "
+                    + ("Euler angles alone" if name == "xbus-euler"
+                       else "Euler angles and quaternion (the default)"))
         elif name == "ar4000":
             fuzz_ar4000(args.n, rng, t)
             note = "mutated lines read as a distance (the protocol has no checksum)"
@@ -255,7 +269,7 @@ def main() -> None:
         dt = time.perf_counter() - t0
         print(f"{name:<9s} {t.n:9d} {t.crashes:8d} {t.hangs:6d} {t.accepted:9d} "
               f"{t.checked:8d} {dt:6.0f}  {note}", flush=True)
-        if name == "xbus":
+        if name.startswith("xbus"):
             print(f"  of the accepted, with an angle off by more than 0.01 deg: {t.severe}")
         if t.first_crash:
             print(f"  first crash: {t.first_crash}", file=sys.stderr)

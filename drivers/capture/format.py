@@ -371,6 +371,11 @@ def read_capture(path: str | os.PathLike[str]) -> Capture:
         if not (root / fname).is_file():
             raise CaptureFormatError(mpath, None, f"devices.{name}.file {fname!r} does not exist")
         settings = {k: v for k, v in d.items() if k not in ("kind", "file")}
+        cfg = settings.get("config")
+        if kind == "mti_serial" and isinstance(cfg, dict) and "orientation" not in cfg:
+            # recorded before the MTi driver asked for Euler angles and quaternion both
+            # (2026-11-26): the device was sent Euler angles alone
+            settings["config"] = {**cfg, "orientation": "euler"}
         out[name] = DeviceEntry(name, kind, fname, settings)
     start = m.get("start_unix", 0.0)
     if isinstance(start, bool) or not isinstance(start, int | float):

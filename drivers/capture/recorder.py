@@ -163,11 +163,14 @@ class Recorder:
             elif kind == "mti_serial":
                 import serial
 
-                from drivers.xsens.serial_driver import MtiSerialDriver
+                from drivers.xsens.serial_driver import ORIENTATIONS, MtiSerialDriver
 
                 args = {k: v for k, v in d.items() if k != "kind"}
-                tap = self.writer.add_serial(name, kind, port=d.get("port"),
-                                             baudrate=d.get("baudrate", 115200), config=d)
+                # the orientation is recorded even when it is the default: the default
+                # changed once, and a replay must configure what the device sent
+                tap = self.writer.add_serial(
+                    name, kind, port=d.get("port"), baudrate=d.get("baudrate", 115200),
+                    config={**d, "orientation": d.get("orientation", ORIENTATIONS[0])})
 
                 def factory(*a: Any, **kw: Any) -> Any:
                     return TappedSerial(serial.Serial(*a, **kw), tap)

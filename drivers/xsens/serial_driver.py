@@ -11,9 +11,11 @@ and a clear :class:`DeviceError`:
    device that is off, and says so;
 3. ReqDID (0x00) -> DeviceID (0x01) and ReqFWRev (0x12) -> FirmwareRev (0x13), logged
    and published in ``health.extra``;
-4. SetOutputConfiguration (0xC0) for exactly what the loop needs - EulerAngles or
-   Quaternion, RateOfTurn, Acceleration at ``rate_hz``, PacketCounter, SampleTimeFine
-   and StatusWord in every packet - and check the acknowledgement (0xC1);
+4. SetOutputConfiguration (0xC0) for exactly what the loop needs - EulerAngles and
+   Quaternion (``orientation = "euler+quaternion"``, the default: two encodings of one
+   orientation, so a corrupted angle that passes the one-byte checksum disagrees with
+   the other), or either alone, RateOfTurn, Acceleration at ``rate_hz``, PacketCounter,
+   SampleTimeFine and StatusWord in every packet - and check the acknowledgement (0xC1);
 5. GoToMeasurement (0x10) -> 0x11.
 
 An Error (0x42) answer to any step raises with the decoded error code. In
@@ -31,6 +33,7 @@ default here; legacy devices used 8N2 - ``stopbits`` is configurable).
 from __future__ import annotations
 
 import logging
+import math
 import struct
 import time
 from collections.abc import Callable, Mapping
@@ -44,13 +47,15 @@ from drivers.xsens.mtdata2 import (
     FRAME_BY_NAME,
     MAX_FREQUENCY,
     PRECISION_BY_NAME,
+    PRECISION_SIZE,
+    TYPE_MASK,
     XDI,
     decode_output_configuration,
     encode_output_configuration,
     item_label,
     mtdata2_values,
 )
-from drivers.xsens.orientation import quat_to_euler_deg
+from drivers.xsens.orientation import euler_deg_to_quat, quat_to_euler_deg
 from drivers.xsens.xbus import MID, MID_NAMES, XbusMessage, XbusParser, describe_error, encode_frame
 
 log = logging.getLogger(__name__)
@@ -65,6 +70,14 @@ _NO_INVALID: frozenset[str] = frozenset()
 _EULER, _RATE_OF_TURN, _ACCELERATION = XDI.EULER_ANGLES, XDI.RATE_OF_TURN, XDI.ACCELERATION
 _PACKET_COUNTER, _SAMPLE_TIME_FINE, _STATUS_WORD = (XDI.PACKET_COUNTER, XDI.SAMPLE_TIME_FINE,
                                                     XDI.STATUS_WORD)
+_QUATERNION = XDI.QUATERNION
+ORIENTATIONS = ("euler+quaternion", "euler", "quaternion")
+"""What the MTi is asked to send for its orientation; the first is the default."""
+AGREEMENT_DEG = 0.005
+"""How far the Euler angles and the quaternion of one packet may disagree (as a rotation):
+both come from the device's one orientation, so only rounding separates them (about
+1e-5 deg in float32). A corrupted angle byte moves one of them by more than this; half
+the 0.01 deg the loop's angles resolve."""
 SAMPLE_TIME_FINE_S = 1e-4
 """SampleTimeFine counts a 10 kHz clock (MTi documentation; CAN 'SampleTime' note)."""
 
@@ -88,7 +101,8 @@ class MtiSerialDriver(Driver):
         "stopbits", "command_timeout_s", "data_timeout_s", "read_timeout_s", "backoff_s")
 
     def __init__(self, name: str = "mti", port: str = "/dev/ttyUSB0", baudrate: int = 115200,
-                 rate_hz: int = 100, orientation: str = "euler", precision: str = "float32",
+                 rate_hz: int = 100, orientation: str = ORIENTATIONS[0],
+                 precision: str = "float32",
                  coordinate_frame: str = "ENU", stopbits: int = 1,
                  command_timeout_s: float = 1.0, data_timeout_s: float = 1.0,
                  read_timeout_s: float = 0.05, clock: Callable[[], float] = time.monotonic,
@@ -99,8 +113,8 @@ class MtiSerialDriver(Driver):
         _check("baudrate", baudrate, baudrate in BAUD_RATES, f"one of {BAUD_RATES}")
         _check("rate_hz", rate_hz, isinstance(rate_hz, int) and 1 <= rate_hz <= 2000,
                "an integer in 1..2000 Hz")
-        _check("orientation", orientation, orientation in ("euler", "quaternion"),
-               "'euler' or 'quaternion'")
+        _check("orientation", orientation, orientation in ORIENTATIONS,
+               f"one of {ORIENTATIONS}")
         _check("precision", precision, precision in PRECISION_BY_NAME,
                f"one of {sorted(PRECISION_BY_NAME)}")
         _check("coordinate_frame", coordinate_frame, coordinate_frame in FRAME_BY_NAME,
@@ -113,12 +127,17 @@ class MtiSerialDriver(Driver):
         self.baudrate = baudrate
         self.rate_hz = rate_hz
         self.orientation = orientation
+        self._redundant = orientation == "euler+quaternion"
         self.precision = precision
         self.coordinate_frame = coordinate_frame
         self.stopbits = stopbits
         self.command_timeout_s = float(command_timeout_s)
         self.data_timeout_s = float(data_timeout_s)
         self.read_timeout_s = float(read_timeout_s)
+        need = self.line_load() * baudrate  # the device drops what the line cannot carry
+        _check("baudrate", baudrate, need <= baudrate,
+               f"at least {need:.0f} baud for {self.packet_bytes()}-byte packets at "
+               f"{rate_hz} Hz (raise 'baudrate' or lower 'rate_hz')")
         self.serial_factory = serial_factory
         self.device_id: int | None = None
         self.firmware: str | None = None
@@ -230,10 +249,29 @@ class MtiSerialDriver(Driver):
         """The (XDI, frequency) list sent with SetOutputConfiguration."""
         prec = PRECISION_BY_NAME[self.precision]
         frame = FRAME_BY_NAME[self.coordinate_frame]
-        ori = XDI.EULER_ANGLES if self.orientation == "euler" else XDI.QUATERNION
-        return [(XDI.PACKET_COUNTER, MAX_FREQUENCY), (XDI.SAMPLE_TIME_FINE, MAX_FREQUENCY),
-                (ori | frame | prec, self.rate_hz), (XDI.ACCELERATION | prec, self.rate_hz),
-                (XDI.RATE_OF_TURN | prec, self.rate_hz), (XDI.STATUS_WORD, MAX_FREQUENCY)]
+        ori = XDI.QUATERNION if self.orientation == "quaternion" else XDI.EULER_ANGLES
+        out = [(XDI.PACKET_COUNTER, MAX_FREQUENCY), (XDI.SAMPLE_TIME_FINE, MAX_FREQUENCY),
+               (ori | frame | prec, self.rate_hz), (XDI.ACCELERATION | prec, self.rate_hz),
+               (XDI.RATE_OF_TURN | prec, self.rate_hz), (XDI.STATUS_WORD, MAX_FREQUENCY)]
+        if self._redundant:
+            out.append((XDI.QUATERNION | frame | prec, self.rate_hz))
+        return out
+
+    def packet_bytes(self) -> int:
+        """Bytes on the line of one MTData2 packet of :meth:`requested_outputs`."""
+        size = PRECISION_SIZE[PRECISION_BY_NAME[self.precision]]
+        payload = 0
+        for xdi, _ in self.requested_outputs():
+            t = xdi & TYPE_MASK
+            payload += 3 + (2 if t == XDI.PACKET_COUNTER else 4 if t in (
+                XDI.SAMPLE_TIME_FINE, XDI.STATUS_WORD) else 4 * size if t == XDI.QUATERNION
+                else 3 * size)
+        return payload + 5 + (2 if payload > 254 else 0)  # FA FF 36 LEN .. checksum
+
+    def line_load(self) -> float:
+        """Share of the serial line the configured packets take (start, 8 data, stop
+        bits per byte)."""
+        return self.packet_bytes() * (9 + self.stopbits) * self.rate_hz / self.baudrate
 
     def open(self) -> None:
         self.close()
@@ -306,9 +344,11 @@ class MtiSerialDriver(Driver):
         get = items.get
         e, g, acc = get(_EULER), get(_RATE_OF_TURN), get(_ACCELERATION)
         pc, stf, sw = get(_PACKET_COUNTER), get(_SAMPLE_TIME_FINE), get(_STATUS_WORD)
+        q = get(_QUATERNION) if self._redundant else None
         if (e is not None and g is not None and acc is not None and pc is not None
-                and stf is not None and sw is not None):  # the configured packet: all there
-            if not self._consistent(pc, stf, e, g, acc):
+                and stf is not None and sw is not None  # the configured packet: all there
+                and (q is not None or not self._redundant)):
+            if not self._consistent(pc, stf, e, g, acc, q):
                 return None
             self._count_gap(pc)
             return Reading(self.name, t_host, {
@@ -355,25 +395,31 @@ class MtiSerialDriver(Driver):
     """Packets a frame may follow the previous one by (dropped ones in between)."""
 
     def _consistent(self, pc: int, stf: int, e: tuple[float, ...], g: tuple[float, ...],
-                    acc: tuple[float, ...]) -> bool:
+                    acc: tuple[float, ...], q: tuple[float, ...] | None = None) -> bool:
         """Does the frame agree with itself and with the one before? The Xbus checksum is
         one byte, so about 1 in 256 corrupted frames pass it; what the frame carries
-        catches them: the packet counter and the 10 kHz sample time must advance
+        catches them: the Euler angles and the quaternion (when both are sent) must be
+        one orientation, the packet counter and the 10 kHz sample time must advance
         together, the values must be in the sensor's range, and the angles cannot jump
-        further than the measured rate of turn allows. A frame that fails is counted
-        and dropped; it still becomes the reference, so after a real reset of the device
-        one frame is lost, not all."""
+        further than the measured rate of turn allows (with 2 deg of slack: a real
+        MTi-G-710's filter corrects its angles in steps of up to 0.4 deg, fixture
+        ``xsens-mti-g710``). A frame that fails is counted and dropped; it still becomes
+        the reference, so after a real reset of the device one frame is lost, not all."""
         prev, self._prev_frame = self._prev_frame, (pc, stf, (e[0], e[1], e[2]))
         if not (abs(e[0]) <= 180.0 and abs(e[1]) <= 90.0 and abs(e[2]) <= 180.0
                 and max(abs(g[0]), abs(g[1]), abs(g[2])) <= 35.0  # 2000 deg/s
                 and max(abs(acc[0]), abs(acc[1]), abs(acc[2])) <= 200.0):
+            return self._inconsistent()
+        if q is not None and not orientations_agree(e, q):
             return self._inconsistent()
         if prev is None:
             return True
         n = (pc - prev[0]) & 0xFFFF
         dt = ((stf - prev[1]) & 0xFFFFFFFF) * SAMPLE_TIME_FINE_S
         rate = float(self.health.extra.get("output_rate_hz") or self.rate_hz)
-        if not 1 <= n <= self.MAX_GAP or abs(dt - n / rate) > 0.5 / rate:
+        # the sample time counts a 10 kHz clock and the output rates divide it: packets
+        # n apart are n/rate apart to the tick (1.5 ticks for the rounding of odd rates)
+        if not 1 <= n <= self.MAX_GAP or abs(dt - n / rate) > 1.5 * SAMPLE_TIME_FINE_S:
             return self._inconsistent()
         # 2 deg of slack, plus three times what the fastest measured rate could turn
         limit = 2.0 + 3.0 * 57.3 * max(abs(g[0]), abs(g[1]), abs(g[2])) * dt
@@ -406,6 +452,22 @@ class MtiSerialDriver(Driver):
                 ser.close()
             except (OSError, serial.SerialException):
                 pass
+
+
+def orientations_agree(e: tuple[float, ...], q: tuple[float, ...],
+                       tol_deg: float = AGREEMENT_DEG) -> bool:
+    """Are Euler angles ``e`` (deg) and quaternion ``q`` one orientation within ``tol_deg``?
+    Compared as quaternions (the angle of the rotation between them), which has no
+    singularity at pitch +-90 deg as a comparison of angles would; a quaternion whose
+    norm is off by more than rounding is itself corrupted."""
+    n2 = q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]
+    if not abs(n2 - 1.0) <= 1e-4:
+        return False
+    r = euler_deg_to_quat(e[0], e[1], e[2])
+    dot = r[0] * q[0] + r[1] * q[1] + r[2] * q[2] + r[3] * q[3]
+    # sin(half the angle between them) = sqrt(1 - cos^2), exact near zero
+    s2 = 1.0 - dot * dot / n2
+    return s2 <= math.sin(math.radians(tol_deg) / 2.0) ** 2
 
 
 def _check(key: str, value: object, ok: bool, expected: str) -> None:

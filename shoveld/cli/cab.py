@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
 from shoveld.cli import CliError
+from shoveld.cli.words import n_of as _n
 from shoveld.endpoints import endpoint_arg
 
 if TYPE_CHECKING:
@@ -92,10 +93,6 @@ def run_web(args: argparse.Namespace, page: str) -> int:
 
 
 TOPICS = frozenset({"payload/live", "pass", "truck", "health"})
-
-
-def _n(k: Any, one: str, many: str) -> str:
-    return f"{k} {one if k == 1 else many}"
 
 
 def _truck_word(t: dict[str, Any]) -> str:

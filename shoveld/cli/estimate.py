@@ -8,6 +8,7 @@ import sys
 
 from shoveld.cli import CliError
 from shoveld.cli.common import read_params, read_tables
+from shoveld.cli.words import n_of
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -77,7 +78,8 @@ def run(args: argparse.Namespace) -> int:
         print()
         for t in trucks:
             d = t.as_dict()
-            print(f"truck {d['truck']:3d}: {d['passes']} passes, {d['total_kg']:9.0f} kg of "
+            print(f"truck {d['truck']:3d}: {n_of(d['passes'], 'pass', 'passes')}, "
+                  f"{d['total_kg']:9.0f} kg of "
                   f"{d['target_kg']:.0f} kg ({d['fill_pct']:.1f} %), {d['status']}")
         r = summary["rule_10_10_20"]
         if r["trucks"]:

@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 
 from shoveld.cli import CliError
+from shoveld.cli.words import n_of
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -132,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
     print()
     for i, t in trucks.items():
         d = t.as_dict()
-        print(f"truck {i:4d}: {d['passes']} passes, {d['total_kg']:9.0f} kg of "
+        print(f"truck {i:4d}: {n_of(d['passes'], 'pass', 'passes')}, {d['total_kg']:9.0f} kg of "
               f"{d['target_kg']:.0f} kg ({d['fill_pct']:.1f} %), {d['status']}"
               f"{'' if closed[i] else ' (open)'}")
     rule = rule_101020([t for i, t in trucks.items() if closed[i]])

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from shoveld.cli import CliError
+from shoveld.cli.words import n_of
 from shoveld.endpoints import endpoint_arg
 
 if TYPE_CHECKING:
@@ -147,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
                        if msg["valid"] else f"INVALID: {msg['reason']}")
                 print(f"pass {msg['pass']:4d}  truck {msg['truck']:3d}  {val}", flush=True)
             elif msg.get("closed"):
-                print(f"truck {msg['truck']:3d} closed: {msg['passes']} passes, "
+                print(f"truck {msg['truck']:3d} closed: {n_of(msg['passes'], 'pass', 'passes')}, "
                       f"{msg['total_kg']:.0f} kg of {msg['target_kg']:.0f} kg "
                       f"({msg['fill_pct']} %), {msg['status']}", flush=True)
 

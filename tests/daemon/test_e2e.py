@@ -108,6 +108,10 @@ def test_replay_takes_the_capture_folders_own_params(tmp_path: Path) -> None:
                           str(tmp_path / "state"), "--csv"], capture_output=True, text=True,
                          check=True).stdout.splitlines()
     assert len(csv) - 1 == len(EXPECTED["passes"])
+    text = subprocess.run([sys.executable, "-m", "shoveld", "passes", "--state-dir",
+                           str(tmp_path / "state")], capture_output=True, text=True,
+                          check=True).stdout
+    assert "truck    2: 1 pass, " in text and "truck    1: 2 passes, " in text  # not "1 passes"
 
 
 @pytest.mark.parametrize("speed", ["0", "-2", "nan", "fast"])

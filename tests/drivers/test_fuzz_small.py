@@ -14,7 +14,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
 import fuzz  # noqa: E402
 
 from drivers.xsens.mtdata2 import XDI, encode_mtdata2  # noqa: E402
-from drivers.xsens.serial_driver import MtiSerialDriver  # noqa: E402
+from drivers.xsens.orientation import euler_deg_to_quat  # noqa: E402
+from drivers.xsens.serial_driver import MtiSerialDriver, orientations_agree  # noqa: E402
 
 
 @pytest.mark.parametrize("parser", fuzz.PARSERS)
@@ -22,8 +23,8 @@ def test_no_crash_no_hang(parser: str) -> None:
     t = fuzz.Tally(parser, hang_s=1.0)
     rng = random.Random(7)
     n = 3000
-    if parser == "xbus":
-        fuzz.fuzz_xbus(n, rng, t)
+    if parser.startswith("xbus"):
+        fuzz.fuzz_xbus(n, rng, t, "euler" if parser == "xbus-euler" else "euler+quaternion")
     elif parser == "ar4000":
         fuzz.fuzz_ar4000(n, rng, t)
     elif parser == "modbus":
@@ -35,24 +36,69 @@ def test_no_crash_no_hang(parser: str) -> None:
 
 
 def frame(pc: int, stf: int, euler: tuple[float, float, float] = (1.0, -44.5, 3.0),
+          acc: tuple[float, float, float] = (0.9, 0.1, 9.7),
+          quat: tuple[float, ...] | None = None) -> bytes:
+    items = [(XDI.EULER_ANGLES, euler), (XDI.RATE_OF_TURN, (0.01, 0.02, 0.0)),
+             (XDI.ACCELERATION, acc), (XDI.PACKET_COUNTER, pc), (XDI.SAMPLE_TIME_FINE, stf),
+             (XDI.STATUS_WORD, 3)]
+    if quat is not None:
+        items.append((XDI.QUATERNION, quat))
+    return encode_mtdata2(items)
+
+
+@pytest.mark.parametrize("orientation", ["euler", "euler+quaternion"])
+def test_frames_that_disagree_with_themselves_or_the_last_are_dropped(orientation: str) -> None:
+    drv = MtiSerialDriver.from_config({"port": "/dev/null", "rate_hz": 100,
+                                       "orientation": orientation})
+    both = orientation == "euler+quaternion"
+
+    def f(pc: int, stf: int, euler: tuple[float, float, float] = (1.0, -44.5, 3.0),
           acc: tuple[float, float, float] = (0.9, 0.1, 9.7)) -> bytes:
-    return encode_mtdata2([(XDI.EULER_ANGLES, euler), (XDI.RATE_OF_TURN, (0.01, 0.02, 0.0)),
-                           (XDI.ACCELERATION, acc), (XDI.PACKET_COUNTER, pc),
-                           (XDI.SAMPLE_TIME_FINE, stf), (XDI.STATUS_WORD, 3)])
+        return frame(pc, stf, euler, acc, euler_deg_to_quat(*euler) if both else None)
 
-
-def test_frames_that_disagree_with_themselves_or_the_last_are_dropped() -> None:
-    drv = MtiSerialDriver.from_config({"port": "/dev/null", "rate_hz": 100})
-    assert drv.decode(frame(10, 1000)) is not None
-    assert drv.decode(frame(11, 1100)) is not None
-    assert drv.decode(frame(12, 1200)) is not None  # steady at 100 Hz
-    assert drv.decode(frame(15, 1500)) is not None  # two dropped: counter and time agree
-    assert drv.decode(frame(16, 9999)) is None  # the time disagrees with the counter
-    assert drv.decode(frame(17, 1700)) is None  # (its successor checks against it)
-    assert drv.decode(frame(18, 1800)) is not None
-    assert drv.decode(frame(19, 1900, euler=(1.0, -30.0, 3.0))) is None  # 14.5 deg in 10 ms
-    assert drv.decode(frame(20, 2000)) is None
-    assert drv.decode(frame(21, 2100, acc=(0.9, 1e3, 9.7))) is None  # out of range
+    assert drv.decode(f(10, 1000)) is not None
+    assert drv.decode(f(11, 1100)) is not None
+    assert drv.decode(f(12, 1200)) is not None  # steady at 100 Hz
+    assert drv.decode(f(15, 1500)) is not None  # two dropped: counter and time agree
+    assert drv.decode(f(16, 9999)) is None  # the time disagrees with the counter
+    assert drv.decode(f(17, 1700)) is None  # (its successor checks against it)
+    assert drv.decode(f(18, 1800)) is not None
+    assert drv.decode(f(19, 1900, euler=(1.0, -30.0, 3.0))) is None  # 14.5 deg in 10 ms
+    assert drv.decode(f(20, 2000)) is None
+    assert drv.decode(f(21, 2100, acc=(0.9, 1e3, 9.7))) is None  # out of range
     partial = encode_mtdata2([(XDI.EULER_ANGLES, (1.0, -44.5, 3.0)), (XDI.PACKET_COUNTER, 22)])
     assert drv.decode(partial) is None  # the configured packet, cut: not this device's
     assert drv.health.extra["inconsistent_frames"] == 6
+    if both:  # a packet without its quaternion is not the configured one either
+        assert drv.decode(frame(23, 2300)) is None
+
+
+def test_euler_angles_that_disagree_with_the_quaternion_are_dropped() -> None:
+    """Sent both, a corruption of either that passes the checksum and every continuity
+    check (0.02 deg is well inside the 2 deg a real filter may step) still shows."""
+    drv = MtiSerialDriver.from_config({"port": "/dev/null"})
+    e = (1.0, -44.5, 3.0)
+    q = euler_deg_to_quat(*e)
+    assert drv.decode(frame(10, 1000, e, quat=q)) is not None
+    assert drv.decode(frame(11, 1100, (1.0, -44.52, 3.0), quat=q)) is None  # pitch moved
+    assert drv.decode(frame(12, 1200, e, quat=q)) is not None
+    assert drv.decode(frame(13, 1300, e, quat=euler_deg_to_quat(1.0, -44.5, 3.02))) is None
+    assert drv.decode(frame(14, 1400, e, quat=tuple(1.001 * c for c in q))) is None  # norm
+    # float32 rounding of either encoding is far inside the agreement
+    assert drv.decode(frame(15, 1500, (1.0, -44.5, 3.004), quat=q)) is not None
+    assert drv.health.extra["inconsistent_frames"] == 3
+
+
+@pytest.mark.parametrize("e", [(0.0, 89.9, 30.0), (179.99, 0.0, -179.99), (-120.0, -60.0, 90.0)])
+def test_agreement_holds_where_euler_angles_are_singular_or_wrap(
+        e: tuple[float, float, float]) -> None:
+    q = euler_deg_to_quat(*e)
+    assert orientations_agree(e, q)
+    assert not orientations_agree((e[0], e[1] - 0.01, e[2]), q)
+    assert not orientations_agree((e[0] + 0.01, e[1], e[2]), q)
+
+
+def test_at_pitch_90_only_the_orientation_counts_not_its_angles() -> None:
+    """There roll and yaw turn about one axis: other angles, the same orientation."""
+    assert orientations_agree((20.0, 90.0, 50.0), euler_deg_to_quat(0.0, 90.0, 30.0))
+    assert not orientations_agree((20.0, 90.0, 50.0), euler_deg_to_quat(0.0, 90.0, 29.98))

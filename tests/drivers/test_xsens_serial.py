@@ -71,7 +71,9 @@ def test_configuration_sequence_and_identity(emu: MtiEmulator) -> None:
 @pytest.mark.parametrize("precision,tol", [("float32", 2e-5), ("fp1220", 1e-6),
                                            ("fp1632", 1e-9), ("float64", 1e-12)])
 def test_streaming_values_match_the_source(emu: MtiEmulator, precision: str, tol: float) -> None:
-    drv = make_driver(emu.port, precision=precision)
+    # float64 Euler angles and quaternion at 100 Hz need more than 115200 baud
+    emu.baudrate = 230400 if precision == "float64" else 115200
+    drv = make_driver(emu.port, precision=precision, baudrate=emu.baudrate)
     drv.open()
     readings = collect(drv, 0.35)
     drv.close()
