@@ -45,6 +45,8 @@ class DiagCalibrator(Calibrator):
 
 def needs_operation(model: Model, dataset: DataSet) -> bool:
     """Does the model have a term the calibration trials cannot identify?"""
+    if any(getattr(t, "needs_full_dipper", False) for t in model.terms):
+        return True
     if not any(getattr(t, "needs_swing", False) for t in model.terms):
         return False
     return dataset.calib_swing_rate() < SWING_EXCITED_RAD_S

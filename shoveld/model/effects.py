@@ -57,6 +57,9 @@ class ExtensionTerm(Term):
     (the staged calibrator reads this attribute); the rest go to the dynamic stage."""
     needs_swing: ClassVar[bool] = False
     """Only swinging excites the term (calibration trials usually do not swing)."""
+    needs_full_dipper: ClassVar[bool] = False
+    """Only the currents of a full dipper excite the term (the trials' loads stay lower):
+    it is identified with the verified passes too, cross-validated."""
     search: ClassVar[dict[str, tuple[float, float]]] = {}
     """Hyper-parameters found by a 1-D search on training data, with their bounds."""
     defaults: ClassVar[dict[str, float]] = {}
@@ -554,6 +557,10 @@ class CurrentSaturation(ExtensionTerm):
     ``i_c_est``): the currents are the outputs, and a column built from a sample's own
     measured current lets the fit predict that sample's noise (the crowd cubic once did,
     and took 2-3 % of the held-out residual on every realistic machine).
+
+    The calibration trials (empty, one known load) stay below a full dipper's currents,
+    where saturation bites hardest, and a cubic fitted there extrapolates badly; the
+    diagnosis identifies the term with the verified passes too (``needs_full_dipper``).
     """
 
     name = "current_saturation"
@@ -565,6 +572,7 @@ class CurrentSaturation(ExtensionTerm):
     signature = "hoist_current"
     defaults = {"ref_a": 500.0, "crowd_ref_a": 150.0}
     static_params = ("K_H3", "K_C3")
+    needs_full_dipper = True
 
     def columns(self, k: Kinematics) -> np.ndarray:
         u_th, u_d = _unit_hoist(k)

@@ -6,6 +6,7 @@ typical range; ``bench/diagnose_matrix.py`` runs many seeds for the detection ma
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from shoveld.diagnose import MODELLED_BY_BASE, diagnose
@@ -28,7 +29,7 @@ KNOWN_MISSES = {
     if e in KNOWN_MISSES else e for e in sorted(SIM_EFFECTS)])
 def test_hidden_effect_is_named_first_and_cuts_the_payload_error(effect: str) -> None:
     mag, seed = draw(effect)
-    calib, measured, _ = session({effect: mag}, seed)
+    calib, measured, ops = session({effect: mag}, seed)
     d = diagnose(calib, measured, engine=False)
     if effect in MODELLED_BY_BASE:
         # the base model carries it: nothing to name, and the payload is already good
@@ -39,7 +40,10 @@ def test_hidden_effect_is_named_first_and_cuts_the_payload_error(effect: str) ->
     assert d.found[0] == effect, f"{effect}={mag:.3g} (seed {seed}): found {d.found}"
     base, ext = d.payload("base"), d.payload("extended")
     assert ext["passes"] == base["passes"] > 5
-    assert ext["rms_kg"] < base["rms_kg"], (base, ext)
+    # the gain: the extended model halves the held-out payload RMS, or brings it
+    # within 1.5 x the Cramer-Rao bound of the verified passes
+    crb = float(np.mean([p.crb_kg for p in ops.passes if p.verified]))
+    assert ext["rms_kg"] <= max(0.5 * base["rms_kg"], 1.5 * crb), (base, ext, crb)
 
 
 def test_data_without_any_effect_gives_nothing() -> None:
