@@ -217,6 +217,7 @@ def main() -> None:
     pair_rows = [r for r in results if r["kind"] == "pair"]
     alone = {(r["pair"], r["truth"]): r["base_rms"] for r in results if r["kind"] == "alone"}
     both = ordered = 0
+    sized: list[bool] = []  # both effects of a pair at the size (>= 0.5 % of rated)
     print(f"\nPairs of effects ({len(pair_rows)}):")
     for r in pair_rows:
         a, b = r["truth"].split("+")
@@ -227,6 +228,9 @@ def main() -> None:
         in_order = got_both and r["found"][:2] == size
         both += got_both
         ordered += in_order
+        if null and all(alone[(r["truth"], n)] ** 2 - floor**2 >= (0.005 * RATED) ** 2
+                        for n in (a, b)):
+            sized.append(got_both)
         print(f"  {a} ({r['spec'][a]:g}, alone {alone[(r['truth'], a)]:.0f} kg) + {b} "
               f"({r['spec'][b]:g}, alone {alone[(r['truth'], b)]:.0f} kg) -> {r['found']}"
               f"{'  both' if got_both else ''}{', in order of size' if in_order else ''}")
@@ -234,6 +238,9 @@ def main() -> None:
         print(f"both found: {both}/{len(pair_rows)} ({100 * both / len(pair_rows):.0f} %), "
               f"both and in order of payload impact: {ordered}/{len(pair_rows)} "
               f"({100 * ordered / len(pair_rows):.0f} %)")
+        if null:
+            print(f"of which both effects move the payload by >= 0.5 % of rated alone: both "
+                  f"found {sum(sized)}/{len(sized)}")
 
     print("\nPer-effect gain: held-out payload RMS over the verified passes, base -> extended "
           "(mean over seeds; % of the 35 t rated load); 'halved' counts cases where the "
