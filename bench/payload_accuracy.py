@@ -69,6 +69,27 @@ def calibrate(machine: Any, seed: int, method: str) -> Any:
     return cal.params_
 
 
+def calibrate_with_verified(machine: Any, seed: int, n: int) -> Any:
+    """The trials plus a session of ``n`` passes whose payloads a scale verified, as the
+    diagnosis identifies a term that needs a full dipper (``DiagCalibrator`` with the
+    verified passes in training): what a field engineer with a weighbridge could add."""
+    from shoveld.diagnose.data import DataSet
+    from shoveld.diagnose.fit import DiagCalibrator
+    from shoveld.model.model import Model
+    from shoveld.sim.scenario import simulate_calibration, simulate_cycles
+
+    tables = [simulate_calibration(0.0, seed=10 * seed + 1, machine=machine).table,
+              simulate_calibration(8420.0, seed=10 * seed + 2, machine=machine).table]
+    session = simulate_cycles(n, seed=10 * seed + 7, machine=machine,
+                              payload_range=(3000.0, 35000.0), truck_target_kg=None,
+                              verified_fraction=1.0)
+    ds = DataSet(tables, [session.table], **({"window_s": SMOOTHING["window_s"]}
+                                             if "window_s" in SMOOTHING else {}),
+                 **({"polyorder": SMOOTHING["polyorder"]} if "polyorder" in SMOOTHING else {}))
+    train = {p.index for p in ds.passes if p.verified}
+    return DiagCalibrator(Model.from_names([]), ds, train, "output").fit(ds.calib).params_
+
+
 def passes(params: Any, res: Any) -> list[dict[str, float]]:
     from shoveld.engine.offline import estimate_table
 
@@ -105,6 +126,10 @@ def one_machine(job: dict[str, Any]) -> dict[str, Any]:
             p = calibrate(machine, seed, method)
             out[f"{kind}/{method}"] = {"passes": passes(p, res), "empty": passes(p, empty),
                                        "known": passes(p, known)}
+        if kind == "realistic" and job.get("verified"):
+            p = calibrate_with_verified(machine, seed, job["verified"])
+            out["realistic/verified"] = {"passes": passes(p, res), "empty": passes(p, empty),
+                                         "known": passes(p, known)}
     return out
 
 
@@ -144,6 +169,9 @@ def main() -> None:
     ap.add_argument("--coverage", type=int, default=120,
                     help="machines for the parameter coverage table")
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--verified", type=int, default=0, metavar="N",
+                    help="also identify each realistic machine on its trials plus a session "
+                         "of N scale-verified passes, and print its figures (0: not)")
     ap.add_argument("--window", type=float, help="smoothing window, s (default: calibrate's)")
     ap.add_argument("--polyorder", type=int, help="smoothing order (default: calibrate's)")
     args = ap.parse_args()
@@ -153,34 +181,44 @@ def main() -> None:
         print(f"smoothing: {smoothing}")
     t0 = time.perf_counter()
     with ProcessPoolExecutor(args.jobs, initializer=_init, initargs=(smoothing,)) as ex:
-        res = list(ex.map(one_machine, [{"seed": s, "passes": args.passes}
+        res = list(ex.map(one_machine, [{"seed": s, "passes": args.passes,
+                                         "verified": args.verified}
                                         for s in range(1, args.machines + 1)]))
         cov = list(ex.map(coverage_machine, range(101, 101 + args.coverage)))
     print(f"per-pass payload error over {args.machines} machines x {args.passes} passes of "
           f"3-35 t (rated {RATED:.0f} kg); CRB = Cramer-Rao bound of the current noise, "
           "per pass")
     for key, label in (("realistic/output", "realistic machines, output error"),
+                       ("realistic/verified", f"realistic, + {args.verified} verified passes"),
                        ("realistic/equation", "realistic, thesis form (before)"),
                        ("ideal/output", "ideal simulator, output error")):
+        if key not in res[0]:
+            continue
         rows = [r for m in res for r in m[key]["passes"]]
         summary(label, rows)
         if key.startswith("realistic"):
             summary("  of which weakened field in lift", [r for r in rows if r["weak"]])
             summary("  empty dipper", [r for m in res for r in m[key]["empty"]])
             summary("  known load 8,420 kg", [r for m in res for r in m[key]["known"]])
-    print("\nper machine (realistic, output error): seed, passes, mean, RMS, p95, RMS/CRB")
-    ratios = []
-    for m in res:
-        rows = [r for r in m["realistic/output"]["passes"] if r["valid"]]
-        e = np.array([r["err"] for r in rows])
-        crb = np.mean([r["crb"] for r in rows])
-        ratios.append(np.sqrt(np.mean(e**2)) / crb)
-        print(f"  machine {m['seed']:3d}  {len(rows):3d}  {e.mean():+6.0f}  "
-              f"{np.sqrt(np.mean(e**2)):5.0f}  {np.percentile(np.abs(e), 95):5.0f}  "
-              f"{ratios[-1]:4.2f}")
-    print(f"  RMS/CRB over the machines: min {min(ratios):.2f}, median "
-          f"{np.median(ratios):.2f}, max {max(ratios):.2f}")
+    for key in ("realistic/output", "realistic/verified"):
+        if key not in res[0]:
+            continue
+        print(f"\nper machine ({key}): seed, passes, mean, RMS, p95, RMS/CRB")
+        ratios = []
+        for m in res:
+            rows = [r for r in m[key]["passes"] if r["valid"]]
+            e = np.array([r["err"] for r in rows])
+            crb = np.mean([r["crb"] for r in rows])
+            ratios.append(np.sqrt(np.mean(e**2)) / crb)
+            print(f"  machine {m['seed']:3d}  {len(rows):3d}  {e.mean():+6.0f}  "
+                  f"{np.sqrt(np.mean(e**2)):5.0f}  {np.percentile(np.abs(e), 95):5.0f}  "
+                  f"{ratios[-1]:4.2f}")
+        print(f"  RMS/CRB over the machines: min {min(ratios):.2f}, median "
+              f"{np.median(ratios):.2f}, max {max(ratios):.2f}")
 
+    if not cov:
+        print(f"\n({time.perf_counter() - t0:.0f} s wall, {args.jobs} workers)")
+        return
     print(f"\nparameter coverage over {len(cov)} realistic machines (output error): "
           "share within +-2 std err (goal >= 90 %), mean error / mean std err (goal < 0.5)")
     names = list(cov[0])
