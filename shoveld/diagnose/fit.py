@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from shoveld.diagnose.data import DataSet, Pass
+from shoveld.identify import ANGLE_DRIFT_DEG
 from shoveld.identify.calibrate import Calibrator, FileData
 from shoveld.model.kin import Kinematics
 from shoveld.model.model import Model
@@ -33,9 +34,10 @@ class DiagCalibrator(Calibrator):
     """The project's ``Calibrator``, fed the diagnosis's prepared data for a fold."""
 
     def __init__(self, model: Model, dataset: DataSet, train: set[int] | None,
-                 method: str = "output") -> None:
+                 method: str = "output", angle_drift_deg: float = ANGLE_DRIFT_DEG) -> None:
         super().__init__(model=model, method=method, exclusion=dataset.exclusion,
-                         window_s=dataset.window_s, polyorder=dataset.polyorder)
+                         window_s=dataset.window_s, polyorder=dataset.polyorder,
+                         angle_drift_deg=angle_drift_deg)
         self.dataset = dataset
         self.train = train
 

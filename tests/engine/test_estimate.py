@@ -11,7 +11,7 @@ import pytest
 
 from shoveld.cli import main
 from shoveld.engine.offline import estimate_table
-from shoveld.model.params import ModelParams
+from shoveld.model.params import ModelParams, load_params
 from shoveld.payload.trucks import Truck, rule_101020
 from shoveld.sim.scenario import RATED_PAYLOAD_KG, SimResult, simulate_cycles
 
@@ -88,6 +88,33 @@ def test_cli_round_trip(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> N
         assert abs(got["payload_kg"] - tp["payload_kg"]) < 500
     summary = json.loads(out.err.strip().splitlines()[-1])
     assert summary["trucks"] and summary["rule_10_10_20"]["trucks"] >= 1
+
+
+def test_calibrate_takes_scale_verified_passes_with_the_trials(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``--verified``: the weighed passes enter the identification beside the trials (they
+    carry a full dipper's currents); a table without any is refused in one line."""
+    e, l, v, u = (str(tmp_path / n) for n in ("e.csv", "l.csv", "v.csv", "u.csv"))
+    p0, p1 = str(tmp_path / "p0.toml"), str(tmp_path / "p1.toml")
+    for args in (["--scenario", "calibration", "--load", "0", "--seed", "5", "--out", e],
+                 ["--scenario", "calibration", "--load", "8420", "--seed", "6", "--out", l],
+                 ["--passes", "6", "--verified-fraction", "1", "--seed", "8", "--out", v],
+                 ["--passes", "2", "--verified-fraction", "0", "--seed", "9", "--out", u]):
+        assert main(["sim", *args]) == 0
+    assert main(["calibrate", "--out", p0, e, l]) == 0
+    assert main(["calibrate", "--out", p1, e, l, "--verified", v]) == 0
+    err = capsys.readouterr().err
+    assert "identified with 6 verified passes of 6" in err
+    trials, both = load_params(p0), load_params(p1)
+    used = {Path(k).name: x for k, x in both.fit["excluded"].items()}
+    assert set(used) == {"e.csv", "l.csv", "v.csv (verified passes)"}, used
+    assert used["v.csv (verified passes)"]["used"] > 1000
+    assert [Path(k).name for k in trials.fit["excluded"]] == ["e.csv", "l.csv"]
+    assert not np.allclose(trials.values, both.values)
+    assert main(["calibrate", "--out", p1, e, l, "--verified", u]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "--verified" in err and "u.csv" in err and "no pass with a verified payload" in err
+    assert len(err.splitlines()) == 1
 
 
 def test_cli_bad_input_is_one_clear_line(tmp_path: Path,
