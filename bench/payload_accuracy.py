@@ -70,11 +70,9 @@ def calibrate(machine: Any, seed: int, method: str) -> Any:
 
 
 def calibrate_with_verified(machine: Any, seed: int, n: int) -> Any:
-    """The trials plus a session of ``n`` passes whose payloads a scale verified, as the
-    diagnosis identifies a term that needs a full dipper (``DiagCalibrator`` with the
-    verified passes in training): what a field engineer with a weighbridge could add."""
-    from shoveld.diagnose.data import DataSet
-    from shoveld.diagnose.fit import DiagCalibrator
+    """The trials plus a session of ``n`` passes whose payloads a scale verified, as
+    ``shoveld calibrate --verified`` identifies them."""
+    from shoveld.diagnose.fit import calibrate_with_verified
     from shoveld.model.model import Model
     from shoveld.sim.scenario import simulate_calibration, simulate_cycles
 
@@ -83,11 +81,9 @@ def calibrate_with_verified(machine: Any, seed: int, n: int) -> Any:
     session = simulate_cycles(n, seed=10 * seed + 7, machine=machine,
                               payload_range=(3000.0, 35000.0), truck_target_kg=None,
                               verified_fraction=1.0)
-    ds = DataSet(tables, [session.table], **({"window_s": SMOOTHING["window_s"]}
-                                             if "window_s" in SMOOTHING else {}),
-                 **({"polyorder": SMOOTHING["polyorder"]} if "polyorder" in SMOOTHING else {}))
-    train = {p.index for p in ds.passes if p.verified}
-    return DiagCalibrator(Model.from_names([]), ds, train, "output").fit(ds.calib).params_
+    cal, _, _ = calibrate_with_verified(Model.from_names([]), tables, [session.table],
+                                        **SMOOTHING)
+    return cal.params_
 
 
 def passes(params: Any, res: Any) -> list[dict[str, float]]:

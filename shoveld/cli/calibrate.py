@@ -98,22 +98,19 @@ def format_report(params: object) -> str:
 
 def _with_verified(model: Model, tables: list[SignalsTable], args: argparse.Namespace
                    ) -> Calibrator:
-    """The trials plus the verified passes of ``--verified``: the pass segmentation and
-    the training files are the diagnosis's, which identifies its terms the same way."""
-    from shoveld.diagnose.data import DataSet
-    from shoveld.diagnose.fit import DiagCalibrator
+    """The trials plus the verified passes of ``--verified`` (the pass segmentation and
+    the training files are the diagnosis's, which identifies its terms the same way)."""
+    from shoveld.diagnose.fit import calibrate_with_verified
 
-    ds = DataSet(tables, read_tables(args.verified), window_s=args.window,
-                 polyorder=args.polyorder)
-    train = {p.index for p in ds.passes if p.verified}
-    if not train:
-        raise CliError(f"--verified {' '.join(args.verified)}: no pass with a verified "
-                       "payload (the payload_kg column must hold the weighed payload "
-                       "through each verified pass)")
-    print(f"identified with {len(train)} verified passes of {len(ds.passes)} in "
-          f"{len(args.verified)} table(s)", file=sys.stderr)
-    return DiagCalibrator(model, ds, train, args.method,
-                          angle_drift_deg=args.angle_drift).fit(ds.calib)
+    try:
+        cal, used, found = calibrate_with_verified(
+            model, tables, read_tables(args.verified), args.method, args.window,
+            args.polyorder, args.angle_drift)
+    except ValueError as e:
+        raise CliError(f"--verified {' '.join(args.verified)}: {e}") from None
+    print(f"identified with {used} verified passes of {found} in {len(args.verified)} "
+          "table(s)", file=sys.stderr)
+    return cal
 
 
 def run(args: argparse.Namespace) -> int:

@@ -19,6 +19,7 @@ import numpy as np
 from shoveld.diagnose.data import DataSet, Pass
 from shoveld.identify import ANGLE_DRIFT_DEG
 from shoveld.identify.calibrate import Calibrator, FileData
+from shoveld.kinematics import DEFAULT_POLYORDER, DEFAULT_WINDOW_S
 from shoveld.model.kin import Kinematics
 from shoveld.model.model import Model
 from shoveld.model.output import CurrentEquations, noise_sigma
@@ -43,6 +44,25 @@ class DiagCalibrator(Calibrator):
 
     def prepare(self, tables: list[SignalsTable]) -> list[FileData]:
         return self.dataset.training_files(self.model, self.train)
+
+
+def calibrate_with_verified(model: Model, trials: list[SignalsTable],
+                            verified: list[SignalsTable], method: str = "output",
+                            window_s: float = DEFAULT_WINDOW_S,
+                            polyorder: int = DEFAULT_POLYORDER,
+                            angle_drift_deg: float = ANGLE_DRIFT_DEG
+                            ) -> tuple[Calibrator, int, int]:
+    """Identify ``model`` on the trials plus every scale-verified pass of the ``verified``
+    tables (``shoveld calibrate --verified``): the passes bring a full dipper's currents,
+    which the trials lack. Returns the fitted calibrator, the verified passes used and
+    the passes found; none verified raises ValueError."""
+    ds = DataSet(trials, verified, window_s=window_s, polyorder=polyorder)
+    train = {p.index for p in ds.passes if p.verified}
+    if not train:
+        raise ValueError("no pass with a verified payload (the payload_kg column must hold "
+                         "the weighed payload through each verified pass)")
+    cal = DiagCalibrator(model, ds, train, method, angle_drift_deg).fit(ds.calib)
+    return cal, len(train), len(ds.passes)
 
 
 def needs_operation(model: Model, dataset: DataSet) -> bool:
