@@ -129,11 +129,14 @@ def one_machine(job: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def coverage_machine(seed: int) -> dict[str, Any]:
+def coverage_machine(job: tuple[int, int]) -> dict[str, Any]:
+    """Identified against true parameters on one machine: (seed, verified passes)."""
     from shoveld.sim.machine import Machine
 
+    seed, verified = job
     machine = Machine.draw(seed)
-    p = calibrate(machine, seed, "output")
+    p = (calibrate_with_verified(machine, seed, verified) if verified
+         else calibrate(machine, seed, "output"))
     tr = truth_of(machine, p)
     return {n: (float(v), float(se), tr[n]) for n, v, se in
             zip(p.names, p.values, p.stderr, strict=True)}
@@ -167,7 +170,8 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--verified", type=int, default=0, metavar="N",
                     help="also identify each realistic machine on its trials plus a session "
-                         "of N scale-verified passes, and print its figures (0: not)")
+                         "of N scale-verified passes, and print its figures; the coverage "
+                         "table is then of that identification (0: not)")
     ap.add_argument("--window", type=float, help="smoothing window, s (default: calibrate's)")
     ap.add_argument("--polyorder", type=int, help="smoothing order (default: calibrate's)")
     args = ap.parse_args()
@@ -180,7 +184,8 @@ def main() -> None:
         res = list(ex.map(one_machine, [{"seed": s, "passes": args.passes,
                                          "verified": args.verified}
                                         for s in range(1, args.machines + 1)]))
-        cov = list(ex.map(coverage_machine, range(101, 101 + args.coverage)))
+        cov = list(ex.map(coverage_machine, [(s, args.verified) for s in
+                                             range(101, 101 + args.coverage)]))
     print(f"per-pass payload error over {args.machines} machines x {args.passes} passes of "
           f"3-35 t (rated {RATED:.0f} kg); CRB = Cramer-Rao bound of the current noise, "
           "per pass")
@@ -215,7 +220,8 @@ def main() -> None:
     if not cov:
         print(f"\n({time.perf_counter() - t0:.0f} s wall, {args.jobs} workers)")
         return
-    print(f"\nparameter coverage over {len(cov)} realistic machines (output error): "
+    how = f"trials + {args.verified} verified passes" if args.verified else "trials"
+    print(f"\nparameter coverage over {len(cov)} realistic machines (output error, {how}): "
           "share within +-2 std err (goal >= 90 %), mean error / mean std err (goal < 0.5)")
     names = list(cov[0])
     for n in names:
