@@ -262,6 +262,18 @@ def iter_packets(payload: bytes | memoryview) -> Iterator[tuple[int, int, int]]:
         off = start + size
 
 
+def item_size(xdi: int) -> int | None:
+    """Bytes of one item's data as the device sends it (None: unknown, or of any size)."""
+    t = ITEM_TYPES.get(xdi & TYPE_MASK)
+    if t is None:
+        return None
+    if t.kind == "real":
+        return t.count * PRECISION_SIZE[xdi & PRECISION_MASK] if t.count else None
+    if t.kind == "utc":
+        return _UTC.size
+    return struct.calcsize(t.kind) if t.kind.startswith(">") else None
+
+
 def decode_item(xdi: int, data: bytes | memoryview, offset: int, size: int) -> DataItem:
     """Decode one packet; never raises for bad sizes or unknown ids (returns raw bytes)."""
     code, conv, name, prec, frame = _slot_plan(xdi, size)

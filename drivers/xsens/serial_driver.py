@@ -47,12 +47,11 @@ from drivers.xsens.mtdata2 import (
     FRAME_BY_NAME,
     MAX_FREQUENCY,
     PRECISION_BY_NAME,
-    PRECISION_SIZE,
-    TYPE_MASK,
     XDI,
     decode_output_configuration,
     encode_output_configuration,
     item_label,
+    item_size,
     mtdata2_values,
 )
 from drivers.xsens.orientation import euler_deg_to_quat, quat_to_euler_deg
@@ -259,13 +258,7 @@ class MtiSerialDriver(Driver):
 
     def packet_bytes(self) -> int:
         """Bytes on the line of one MTData2 packet of :meth:`requested_outputs`."""
-        size = PRECISION_SIZE[PRECISION_BY_NAME[self.precision]]
-        payload = 0
-        for xdi, _ in self.requested_outputs():
-            t = xdi & TYPE_MASK
-            payload += 3 + (2 if t == XDI.PACKET_COUNTER else 4 if t in (
-                XDI.SAMPLE_TIME_FINE, XDI.STATUS_WORD) else 4 * size if t == XDI.QUATERNION
-                else 3 * size)
+        payload = sum(3 + (item_size(xdi) or 0) for xdi, _ in self.requested_outputs())
         return payload + 5 + (2 if payload > 254 else 0)  # FA FF 36 LEN .. checksum
 
     def line_load(self) -> float:
