@@ -59,14 +59,18 @@ def _init(smoothing: dict[str, Any]) -> None:
     SMOOTHING.update(smoothing)
 
 
-def calibrate(machine: Any, seed: int, method: str) -> Any:
-    from shoveld.identify.calibrate import Calibrator
+def trials(machine: Any, seed: int) -> list[Any]:
+    """The machine's two calibration trials: empty and 8,420 kg."""
     from shoveld.sim.scenario import simulate_calibration
 
-    tables = [simulate_calibration(0.0, seed=10 * seed + 1, machine=machine).table,
-              simulate_calibration(8420.0, seed=10 * seed + 2, machine=machine).table]
-    cal = Calibrator(method=method, **SMOOTHING).fit(tables)
-    return cal.params_
+    return [simulate_calibration(0.0, seed=10 * seed + 1, machine=machine).table,
+            simulate_calibration(8420.0, seed=10 * seed + 2, machine=machine).table]
+
+
+def calibrate(machine: Any, seed: int, method: str) -> Any:
+    from shoveld.identify.calibrate import Calibrator
+
+    return Calibrator(method=method, **SMOOTHING).fit(trials(machine, seed)).params_
 
 
 def calibrate_with_verified(machine: Any, seed: int, n: int) -> Any:
@@ -74,14 +78,13 @@ def calibrate_with_verified(machine: Any, seed: int, n: int) -> Any:
     ``shoveld calibrate --verified`` identifies them."""
     from shoveld.diagnose.fit import calibrate_with_verified
     from shoveld.model.model import Model
-    from shoveld.sim.scenario import simulate_calibration, simulate_cycles
+    from shoveld.sim.scenario import simulate_cycles
 
-    tables = [simulate_calibration(0.0, seed=10 * seed + 1, machine=machine).table,
-              simulate_calibration(8420.0, seed=10 * seed + 2, machine=machine).table]
     session = simulate_cycles(n, seed=10 * seed + 7, machine=machine,
                               payload_range=(3000.0, 35000.0), truck_target_kg=None,
                               verified_fraction=1.0)
-    cal, _, _ = calibrate_with_verified(Model.from_names([]), tables, [session.table],
+    cal, _, _ = calibrate_with_verified(Model.from_names([]), trials(machine, seed),
+                                        [session.table],
                                         **SMOOTHING)
     return cal.params_
 
