@@ -15,6 +15,7 @@ float32 form ``-0.017374229`` - which is exactly what ``struct.unpack('>f')`` gi
 from __future__ import annotations
 
 import math
+import struct
 from decimal import Decimal
 from pathlib import Path
 
@@ -35,18 +36,21 @@ from drivers.xsens.mtdata2 import (
     decode_mtdata2,
     decode_output_configuration,
 )
+from drivers.xsens.orientation import quat_to_euler_deg
+from drivers.xsens.serial_driver import AGREEMENT_DEG, orientations_agree
 from drivers.xsens.xbus import MID, XbusParser
 
 FIXTURES = Path(__file__).resolve().parents[1] / "fixtures" / "xsens-mti-g710"
 PREC = {FLOAT32: "Float32", FP1220: "FP1220", FP1632: "FP1632", FLOAT64: "Float64"}
 FRAME = {ENU: "EastNorthUp", NED: "NorthEastDown", NWU: "NorthWestUp"}
-GOLDEN_NAMES = {"UtcTime": "UTCTime", "GnssPvtData": "GNSSPVTData"}
+GOLDEN_NAMES = {"UtcTime": "UTCTime", "GnssPvtData": "GNSSPVTData", "GnssSatInfo": "GNSSSatInfo",
+                "PositionEcef": "PositionECEF"}
 PVT_LABELS = ("ITOW", "Year", "Month", "Day", "Hour", "Min", "Sec", "Valid", "TAcc", "Nano",
               "FixType", "Flags", "NumSV", "Reserved1", "Lon", "Lat", "Height", "HMSL", "HAcc",
               "VAcc", "VelN", "VelE", "VelD", "GSpeed", "HeadMot", "SAcc", "HeadAcc",
               "HeadVeh", "GDOP", "PDOP", "TDOP", "VDOP", "HDOP", "NDOP", "EDOP")
 LABELS = {"Quaternion": ("Q0", "Q1", "Q2", "Q3"), "DeltaQ": ("Q0", "Q1", "Q2", "Q3"),
-          "LatLon": ("Lat", "Lon")}
+          "LatLon": ("Lat", "Lon"), "RotationMatrix": tuple("ABCDEFGHI")}
 
 
 def go_float(v: float) -> str:
@@ -96,7 +100,7 @@ def golden_item(item: DataItem) -> list[str]:
     assert not item.name.endswith("?") and not item.name.startswith("Unknown"), item
     lines = [golden_header(item) + ":"]
     v = item.value
-    if item.name in ("PacketCounter", "SampleTimeFine", "SampleTimeCoarse"):
+    if item.name in ("PacketCounter", "SampleTimeFine", "SampleTimeCoarse", "BaroPressure"):
         lines.append(f"  {v}")
     elif item.name == "StatusWord":
         lines.append(f"  {v:032b}")
@@ -106,6 +110,13 @@ def golden_item(item: DataItem) -> list[str]:
         frac = ("." + f"{v.nano:09d}".rstrip("0")) if v.nano else ""
         lines.append(f"  {v.year:04d}-{v.month:02d}-{v.day:02d}T{v.hour:02d}:{v.minute:02d}:"
                      f"{v.second:02d}{frac}Z")
+    elif item.name == "GnssSatInfo":
+        # the golden prints the header (iTOW, numSvs, three reserved bytes), not the
+        # satellites that follow it
+        itow, nsv, r1, r2, r3 = struct.unpack_from(">IBBBB", v)
+        assert len(v) == 8 + 4 * nsv  # gnssId, svId, cno, flags per satellite
+        lines += [f"  ITOW:{itow}", f"  NumSVS:{nsv}", f"  Res1:{r1}", f"  Res2:{r2}",
+                  f"  Res3:{r3}"]
     elif isinstance(v, dict):
         lines += [f"  {label}:{x}" for label, x in zip(PVT_LABELS, v.values(), strict=True)]
     elif len(v) == 1:
@@ -134,7 +145,7 @@ def decode_capture(path: Path) -> tuple[list[str], XbusParser]:
     return blocks, parser
 
 
-@pytest.mark.parametrize("folder", ["1", "3"])
+@pytest.mark.parametrize("folder", ["1", "3", "5"])
 def test_output_reproduces_golden(folder: str) -> None:
     blocks, parser = decode_capture(FIXTURES / folder / "output.bin")
     golden = (FIXTURES / folder / "output.golden").read_text()
@@ -146,7 +157,7 @@ def test_output_reproduces_golden(folder: str) -> None:
     assert parser.rejected_bytes == 0 and parser.bad_frames == 0
 
 
-@pytest.mark.parametrize("folder", ["1", "3"])
+@pytest.mark.parametrize("folder", ["1", "3", "5"])
 def test_outputconfig_reproduces_golden(folder: str) -> None:
     settings = decode_output_configuration((FIXTURES / folder / "outputconfig.bin").read_bytes())
     parts = []
@@ -155,3 +166,29 @@ def test_outputconfig_reproduces_golden(folder: str) -> None:
         rate = "Max" if s.frequency == 0xFFFF else f"{s.frequency} Hz"
         parts.append(f"{golden_header(item)}:\n  {rate}")
     assert "\n".join(parts) == (FIXTURES / folder / "outputconfig.golden").read_text()
+
+
+def test_a_real_mti_sends_one_orientation_in_every_form() -> None:
+    """The driver drops a packet whose Euler angles and quaternion disagree by more than
+    AGREEMENT_DEG, on the premise that the device derives both from one orientation in
+    the same instant. Capture 5 holds a real MTi-G-710's rotation matrix and quaternion
+    in the same packets: they agree to float32 rounding, far inside the tolerance, so
+    the check drops no genuine packet."""
+    blocks = 0
+    worst = 0.0
+    msgs = XbusParser().feed((FIXTURES / "5" / "output.bin").read_bytes())
+    for m in msgs:
+        items = {i.name: i.value for i in decode_mtdata2(m.data)}
+        if "RotationMatrix" not in items or "Quaternion" not in items:
+            continue
+        blocks += 1
+        # sent column by column (a, b, c = R11, R21, R31); Euler angles of R = Rz Ry Rx
+        r11, r21, r31, _, _, r32, _, _, r33 = items["RotationMatrix"]
+        e = (math.degrees(math.atan2(r32, r33)), -math.degrees(math.asin(r31)),
+             math.degrees(math.atan2(r21, r11)))
+        q = items["Quaternion"]
+        assert orientations_agree(e, q), (m, e, q)
+        assert orientations_agree(e, q, tol_deg=AGREEMENT_DEG / 100)
+        worst = max(worst, max(abs(a - b) for a, b in zip(e, quat_to_euler_deg(q), strict=True)))
+    assert blocks == 92
+    assert worst < 1e-4, worst
