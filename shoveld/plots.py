@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from shoveld.cycle.phases import PHASES
+from shoveld.words import n_of
 
 
 def _pyplot() -> Any:
@@ -122,7 +123,7 @@ def plot_estimate(table: Any, est: Any, path: str | Path) -> Path:
     ax[1].set_xlabel("time (s)")
     ax[1].set_ylim(-3, 45)
     ax[1].legend(loc="upper right")
-    fig.suptitle(f"{table.source}: {len(est.passes)} passes", fontsize=12)
+    fig.suptitle(f"{table.source}: {n_of(len(est.passes), 'pass', 'passes')}", fontsize=12)
     fig.tight_layout()
     path = Path(path)
     fig.savefig(path, dpi=90)

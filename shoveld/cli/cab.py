@@ -23,8 +23,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
 from shoveld.cli import CliError
-from shoveld.cli.words import n_of as _n
 from shoveld.endpoints import endpoint_arg
+from shoveld.words import n_of
 
 if TYPE_CHECKING:
     from shoveld.daemon.config import TlsConfig
@@ -170,7 +170,7 @@ class CabState:
                 self.lines.append(
                     f"{time.strftime('%H:%M:%S')} {shovel} truck {msg.get('truck')}"
                     f"{' CLOSED' if msg.get('closed') else ''}: "
-                    f"{_n(msg.get('passes'), 'pass', 'passes')}, "
+                    f"{n_of(msg.get('passes'), 'pass', 'passes')}, "
                     f"{msg.get('total_kg', 0):.0f} of {msg.get('target_kg', 0):.0f} kg "
                     f"({msg.get('fill_pct')} %) {_truck_word(msg)}")
             elif topic == "health":
@@ -203,7 +203,7 @@ class CabState:
             v.problems = list(st.get("problems") or [])
             self.lines.append(f"{time.strftime('%H:%M:%S')} {shovel} status: truck "
                               f"{(st.get('truck') or {}).get('truck')}, "
-                              f"{_n(len(v.passes), 'pass', 'passes')} so far")
+                              f"{n_of(len(v.passes), 'pass', 'passes')} so far")
 
     def on_alive(self, shovel: str, alive: bool) -> None:
         with self.lock:
@@ -245,7 +245,7 @@ class CabState:
                 # A truck being loaded is not "under" yet: say so only once it is sent off.
                 word = ("sent off, " + status.upper() if t.get("closed") else
                         "OVER" if status.startswith("over") else "loading")
-                out.append(f"  truck {t.get('truck', '?')}: {n} pass{'' if n == 1 else 'es'}, "
+                out.append(f"  truck {t.get('truck', '?')}: {n_of(n, 'pass', 'passes')}, "
                            f"{total:.0f} of {target:.0f} kg ({t.get('fill_pct', 0)} %)  {word}")
                 if target and not t.get("closed"):
                     recent = [float(p["payload_kg"]) for p in v.passes[-10:]
@@ -280,11 +280,12 @@ class CabState:
                     r = c.get("rule_10_10_20") or {}
                     sh = c.get("shift") or {}
                     if sh.get("trucks"):
-                        out.append(f"  shift so far: {_n(sh['trucks'], 'truck', 'trucks')}, "
-                                   f"{_n(sh['passes'], 'pass', 'passes')}, "
+                        out.append(f"  shift so far: {n_of(sh['trucks'], 'truck', 'trucks')}, "
+                                   f"{n_of(sh['passes'], 'pass', 'passes')}, "
                                    f"{sh['kg'] / 1000:.1f} t")
                     if r.get("trucks"):
-                        out.append(f"  shift: {r['trucks']} trucks, mean fill {r['mean_pct']} %, "
+                        out.append(f"  shift: {n_of(r['trucks'], 'truck', 'trucks')}, "
+                                   f"mean fill {r['mean_pct']} %, "
                                    f"{r['over_110_pct']} % over 110 %, {r['over_120']} over "
                                    f"120 % ({'no overload beyond' if r['compliant'] else 'OUTSIDE'}"
                                    " the 10/10/20 rule)")

@@ -12,6 +12,7 @@ from shoveld.cli import CliError
 from shoveld.cli.common import parse_effects, read_tables
 from shoveld.identify import ANGLE_DRIFT_DEG
 from shoveld.kinematics import DEFAULT_POLYORDER, DEFAULT_WINDOW_S
+from shoveld.words import n_of
 
 if TYPE_CHECKING:
     from shoveld.identify.calibrate import Calibrator
@@ -83,7 +84,7 @@ def format_report(params: object) -> str:
     lines.append("residual RMS: " + ", ".join(
         f"{k} {v:.4g} {'N m' if k == 'handle' else 'N'}" for k, v in fit["residual_rms"].items()))
     for name, st in fit.get("stages", {}).items():
-        lines.append(f"  stage {name}: {st['samples']} samples, condition "
+        lines.append(f"  stage {name}: {n_of(st['samples'], 'sample', 'samples')}, condition "
                      f"{st['condition_number']:.1f}, residual " + ", ".join(
                          f"{k} {v:.4g}" for k, v in st["residual_rms"].items()))
     lines.append("")
@@ -108,8 +109,8 @@ def _with_verified(model: Model, tables: list[SignalsTable], args: argparse.Name
             args.polyorder, args.angle_drift)
     except ValueError as e:
         raise CliError(f"--verified {' '.join(args.verified)}: {e}") from None
-    print(f"identified with {used} verified passes of {found} in {len(args.verified)} "
-          "table(s)", file=sys.stderr)
+    print(f"identified with {n_of(used, 'verified pass', 'verified passes')} of {found} in "
+          f"{n_of(len(args.verified), 'table', 'tables')}", file=sys.stderr)
     return cal
 
 

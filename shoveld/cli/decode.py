@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from typing import Any, BinaryIO, TextIO
 
 from shoveld.cli import CliError
+from shoveld.words import n_of
 
 CHUNK = 1 << 16
 
@@ -93,8 +94,9 @@ def decode_mti(src: BinaryIO, out: TextIO, err: TextIO, args: argparse.Namespace
         if lines:
             out.write("\n".join(lines) + "\n")
     parser.finish()
-    print(f"decode mti: {n_msgs} messages ({n_data} MTData2), {parser.rejected_bytes} "
-          f"rejected bytes, {parser.bad_frames} bad frames", file=err)
+    print(f"decode mti: {n_of(n_msgs, 'message', 'messages')} ({n_data} MTData2), "
+          f"{n_of(parser.rejected_bytes, 'rejected byte', 'rejected bytes')}, "
+          f"{n_of(parser.bad_frames, 'bad frame', 'bad frames')}", file=err)
     return 0
 
 

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from shoveld.cli import CliError
+from shoveld.words import n_of
 
 log = logging.getLogger("shoveld.demo")
 
@@ -145,7 +146,7 @@ def run(args: argparse.Namespace) -> int:
         else:
             print("calibrating the simulated shovel (two simulated trials) ...", flush=True)
             params_path = calibrate_demo(work / "params.toml")
-        print(f"simulating {args.passes} dig cycles ...", flush=True)
+        print(f"simulating {n_of(args.passes, 'dig cycle', 'dig cycles')} ...", flush=True)
         sim = simulate_cycles(args.passes, args.seed, truck_target_kg=args.truck_target)
         table = sim.table
         duration = float(table.time[-1] - table.time[0])
@@ -248,12 +249,13 @@ def _summary(state: Any, service: Any, out: Any) -> None:
     for v in state.shovels.values():
         for c in v.closed:
             n = c["passes"]
-            lines.append(f"  truck {c['truck']}: {n} pass{'' if n == 1 else 'es'}, "
+            lines.append(f"  truck {c['truck']}: {n_of(n, 'pass', 'passes')}, "
                          f"{c['total_kg']:.0f} kg "
                          f"of {c['target_kg']:.0f} kg ({c['fill_pct']} %), {c['status']}")
     st = service.loop_stats.as_dict(service.cfg.loop.rate_hz)
     j = st.get("jitter_ms") or {}
-    lines.append(f"  loop: {st['ticks']} ticks, {st['overruns']} overruns, jitter p50 "
+    lines.append(f"  loop: {n_of(st['ticks'], 'tick', 'ticks')}, "
+                 f"{n_of(st['overruns'], 'overrun', 'overruns')}, jitter p50 "
                  f"{j.get('p50')} ms p99 {j.get('p99')} ms; passes written "
                  f"{service.passes_written}")
     out.write("\n".join(lines) + "\n")

@@ -9,6 +9,7 @@ import sys
 
 from shoveld.cli import CliError
 from shoveld.cli.common import parse_effects, read_tables
+from shoveld.words import n_of
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -67,8 +68,9 @@ def _summary(js: dict) -> str:
         e = js[tag]
         pay = e["payload"]
         rr = e["residual_rms"]
+        verified = n_of(pay.get("passes", 0), "verified pass", "verified passes")
         s = (f"{tag:9s} residual hoist {rr['hoist_A']:.2f} A, crowd {rr['crowd_A']:.2f} A; "
-             f"held-out payload ({pay.get('passes', 0)} verified passes): ")
+             f"held-out payload ({verified}): ")
         if pay.get("passes"):
             s += (f"mean {pay['mean_kg']:+.0f} kg ({pay['mean_pct_rated']:+.2f} %), "
                   f"RMS {pay['rms_kg']:.0f} kg ({pay['rms_pct_rated']:.2f} % of rated)")

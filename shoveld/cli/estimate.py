@@ -8,7 +8,7 @@ import sys
 
 from shoveld.cli import CliError
 from shoveld.cli.common import read_params, read_tables
-from shoveld.cli.words import n_of
+from shoveld.words import n_of
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 from shoveld.cli import CliError
-from shoveld.cli.words import n_of
+from shoveld.words import n_of
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -138,7 +138,8 @@ def run(args: argparse.Namespace) -> int:
               f"{'' if closed[i] else ' (open)'}")
     rule = rule_101020([t for i, t in trucks.items() if closed[i]])
     if rule["trucks"]:
-        print(f"10/10/20 over {rule['trucks']} closed trucks: mean {rule['mean_pct']} % of "
-              f"target, {rule['over_110_pct']} % over 110 %, {rule['over_120']} over 120 % -> "
+        print(f"10/10/20 over {n_of(rule['trucks'], 'closed truck', 'closed trucks')}: "
+              f"mean {rule['mean_pct']} % of target, {rule['over_110_pct']} % over 110 %, "
+              f"{rule['over_120']} over 120 % -> "
               f"{'compliant' if rule['compliant'] else 'NOT compliant'}")
     return 0

@@ -13,6 +13,7 @@ import json
 from pathlib import Path
 
 from shoveld.cli import CliError
+from shoveld.words import n_of
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -119,5 +120,5 @@ def run_router_config(args: argparse.Namespace) -> int:
         args.output.write_text(text)
         roles = sorted({c.role or "?" for c in certs})
         print(f"{args.output}: router {args.name} on {', '.join(listen)}; "
-              f"{len(certs)} certificates ({', '.join(roles)})")
+              f"{n_of(len(certs), 'certificate', 'certificates')} ({', '.join(roles)})")
     return 0

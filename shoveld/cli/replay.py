@@ -13,8 +13,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from shoveld.cli import CliError
-from shoveld.cli.words import n_of
 from shoveld.endpoints import endpoint_arg
+from shoveld.words import n_of
 
 if TYPE_CHECKING:
     from shoveld.daemon.config import DaemonConfig

@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from shoveld.cli import CliError
+from shoveld.words import n_of
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -52,6 +53,7 @@ def run(args: argparse.Namespace) -> int:
         page = write_report(figures, Path(args.out), args.title)
     except OSError as e:
         raise CliError(f"--out {args.out}: {e.strerror or e}") from None
-    print(f"wrote {page} ({len(rows)} passes, {len(figures.trucks)} trucks, "
+    print(f"wrote {page} ({n_of(len(rows), 'pass', 'passes')}, "
+          f"{n_of(len(figures.trucks), 'truck', 'trucks')}, "
           f"{figures.total_kg / 1000:.1f} t)")
     return 0

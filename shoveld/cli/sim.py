@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 from shoveld.cli import CliError
+from shoveld.words import n_of
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -100,14 +101,15 @@ def run(args: argparse.Namespace) -> int:
                 end = float(part.table.time[-1])
         Path(str(out) + ".truth.json").write_text(json.dumps({**truth, "passes": passes},
                                                              indent=1))
-        print(f"wrote {out} ({samples} samples, {end:.0f} s, {len(passes)} passes) and "
-              f"{out}.truth.json")
+        print(f"wrote {out} ({n_of(samples, 'sample', 'samples')}, {end:.0f} s, "
+              f"{n_of(len(passes), 'pass', 'passes')}) and {out}.truth.json")
         return 0
     res = simulate_calibration(args.load, args.seed, rate_hz=args.rate, effects=effects,
                                machine=machine)
     out = Path(args.out)
     write_table(out, res.table)
     Path(str(out) + ".truth.json").write_text(json.dumps(res.truth_json(), indent=1))
-    print(f"wrote {out} ({len(res.table)} samples, {res.table.time[-1]:.0f} s, "
-          f"{len(res.passes)} passes) and {out}.truth.json")
+    print(f"wrote {out} ({n_of(len(res.table), 'sample', 'samples')}, "
+          f"{res.table.time[-1]:.0f} s, {n_of(len(res.passes), 'pass', 'passes')}) and "
+          f"{out}.truth.json")
     return 0

@@ -15,6 +15,7 @@ from drivers.base import Driver
 from shoveld.daemon.assemble import DeviceState
 from shoveld.daemon.loop import percentiles
 from shoveld.daemon.store import ReadingStore
+from shoveld.words import n_of
 
 
 class LatencyStats:
@@ -105,8 +106,10 @@ def problems(drivers: Mapping[str, dict[str, Any]], loop: dict[str, Any],
     if persist.get("last_error"):
         out.append(f"pass log: {persist['last_error']}")
     if loop.get("failing_now"):
-        out.append(f"loop: the last {loop['failing_now']} ticks failed (see the log)")
+        out.append(f"loop: the last {n_of(loop['failing_now'], 'tick', 'ticks')} failed "
+                   "(see the log)")
     recent, ticks = loop.get("overruns_recent") or 0, loop.get("ticks_recent") or 0
     if recent and recent > 0.02 * max(ticks, 1):
-        out.append(f"loop: {recent} overruns in the last {ticks} ticks")
+        out.append(f"loop: {n_of(recent, 'overrun', 'overruns')} in the last "
+                   f"{n_of(ticks, 'tick', 'ticks')}")
     return out

@@ -13,6 +13,7 @@ from shoveld.diagnose.data import RATED_PAYLOAD_KG
 from shoveld.diagnose.explain import VARIABLES, binned
 from shoveld.model.params import ModelParams, save_params
 from shoveld.model.terms import TERMS
+from shoveld.words import n_of
 
 
 def _params_json(p: ModelParams) -> dict[str, Any]:
@@ -243,8 +244,9 @@ def write_report(d: Diagnosis, out_dir: str | Path) -> Path:
     lines = ["# Model diagnosis", ""]
     files = ", ".join(js["data"]["measured_files"])
     lines.append(f"Measured data: {files} ({js['data']['measured_hours']:.2f} h, "
-                 f"{js['data']['passes']} passes, {js['data']['verified_passes']} with a "
-                 f"scale weight). Calibration trials: {', '.join(js['data']['calib_files'])}.")
+                 f"{n_of(js['data']['passes'], 'pass', 'passes')}, "
+                 f"{js['data']['verified_passes']} with a scale weight). "
+                 f"Calibration trials: {', '.join(js['data']['calib_files'])}.")
     lines += ["", "## Finding", ""]
     if d.found:
         for i, n in enumerate(d.found, 1):
@@ -254,7 +256,8 @@ def write_report(d: Diagnosis, out_dir: str | Path) -> Path:
         lines.append("")
         lines.append(
             f"With {'this' if len(d.found) == 1 else 'these'} in the model, the payload error "
-            f"on the {e.get('passes', 0)} verified passes the model had not seen goes from "
+            f"on the {n_of(e.get('passes', 0), 'verified pass', 'verified passes')} "
+            "the model had not seen goes from "
             f"{b.get('rms_kg', math.nan):.0f} kg RMS ({b.get('rms_pct_rated', math.nan):.2f} % "
             f"of the {RATED_PAYLOAD_KG:,.0f} kg rated load; "
             f"mean {b.get('mean_kg', math.nan):+.0f} kg)"

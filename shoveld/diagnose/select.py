@@ -35,6 +35,7 @@ from scipy import stats
 
 from shoveld.diagnose.data import DataSet
 from shoveld.diagnose.fit import Evaluation, evaluate
+from shoveld.words import n_of
 
 UNSTABLE = 1.0
 """A candidate whose held-out residual is more than (1 + this) times the current model's
@@ -166,7 +167,7 @@ def compare(dataset: DataSet, cur: Evaluation, cand: Evaluation, name: str, n_tr
     elif len(e0) > 2 and cfg.payload_alpha < 1.0 and not (
             pays := _pays(e0, e1, cfg.payload_alpha))[0]:
         why = (f"does not pay on the payload (held-out RMS {_rms(e0):.0f} -> {_rms(e1):.0f} kg"
-               f" over {len(e0)} verified passes, p {pays[1]:.2g})")
+               f" over {n_of(len(e0), 'verified pass', 'verified passes')}, p {pays[1]:.2g})")
     elif len(e0) and worse > cfg.payload_tolerance * cal:
         why = (f"does not pay (held-out payload RMS {worse:+.0f} kg, more than "
                f"{cfg.payload_tolerance:g} x its calibration uncertainty {cal:.0f} kg)")

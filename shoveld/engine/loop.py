@@ -26,6 +26,7 @@ from shoveld.model.params import ModelParams
 from shoveld.payload.rls import PayloadRls, RlsConfig
 from shoveld.payload.trucks import Truck
 from shoveld.sample import Sample
+from shoveld.words import n_of
 
 NEEDED = ("handle_deg", "crowd_m", "hoist1_a", "hoist2_a", "hoist_field_a", "crowd_a")
 """Signals without which a payload update is not made."""
@@ -256,7 +257,8 @@ class Engine:
         assert rls is not None
         valid = rls.n >= self.cfg.min_samples
         reason = "" if valid else (
-            f"only {rls.n} valid samples in lift and swing ({self.invalid_updates} invalid)")
+            f"only {n_of(rls.n, 'valid sample', 'valid samples')} in lift and swing "
+            f"({self.invalid_updates} invalid)")
         pr = PassResult(self.pass_index, self.truck.index, self.pass_start, t, rls.payload_kg,
                         self._std(), rls.n, valid, reason)
         self.truck.passes.append(pr.as_dict())

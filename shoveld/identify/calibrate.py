@@ -28,6 +28,7 @@ from shoveld.model.kin import Kinematics
 from shoveld.model.model import EQUATIONS, Model
 from shoveld.model.params import ModelParams
 from shoveld.signals.table import SignalsTable
+from shoveld.words import n_of
 
 METHODS = ("output", "equation")
 FIELD_KNOT_STEP_A = 10.0
@@ -346,7 +347,7 @@ class Calibrator:
                        residual_rms={eq: float(s) for eq, s in zip(EQUATIONS, sigma,
                                                                     strict=True)},
                        current_residual_rms_a=of.residual_rms, iterations=of.iterations,
-                       covariance=f"sandwich over {of.blocks} blocks of "
+                       covariance=f"sandwich over {n_of(of.blocks, 'block', 'blocks')} of "
                                   f"{output_error.BLOCK_S:g} s, plus a handle-angle drift "
                                   f"of {self.angle_drift_deg:g} deg per file",
                        angle_drift_deg=self.angle_drift_deg)

@@ -13,6 +13,8 @@ import math
 
 import numpy as np
 
+from shoveld.words import n_of
+
 
 def savgol_coeffs(window: int, polyorder: int, deriv: int = 0, delta: float = 1.0,
                   pos: int | None = None, use: str = "conv",
@@ -35,7 +37,8 @@ def savgol_coeffs(window: int, polyorder: int, deriv: int = 0, delta: float = 1.
     elif keep is not None:
         x = x[keep]
         if len(x) <= polyorder:
-            raise ValueError(f"savgol: {len(x)} samples kept, need more than order {polyorder}")
+            raise ValueError(f"savgol: {n_of(len(x), 'sample', 'samples')} kept, need more "
+                             f"than order {polyorder}")
     vander = x[None, :] ** np.arange(polyorder + 1)[:, None]
     target = np.zeros(polyorder + 1)
     target[deriv] = math.factorial(deriv) / delta**deriv
@@ -50,7 +53,7 @@ def savgol_filter(y: np.ndarray, window: int, polyorder: int, deriv: int = 0,
     y = np.asarray(y, dtype=float)
     n = len(y)
     if n < window:
-        raise ValueError(f"savgol: {n} samples, fewer than the window {window}")
+        raise ValueError(f"savgol: {n_of(n, 'sample', 'samples')}, fewer than the window {window}")
     half = window // 2
     out = np.empty(n)
     out[half:n - half] = np.convolve(y, savgol_coeffs(window, polyorder, deriv, delta),

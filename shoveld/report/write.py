@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from shoveld.report.figures import ShiftFigures
+from shoveld.words import n_of
 
 
 def _when(t: float) -> str:
@@ -116,8 +117,9 @@ def write_report(f: ShiftFigures, out: Path, title: str = "Shift report") -> Pat
         "img{max-width:100%;margin:.5rem 1rem .5rem 0}",
         "</style></head><body>",
         f"<h1>{e(title)}</h1>",
-        f"<p>{_when(f.since)} to {_when(f.until)} &middot; {len(f.passes)} passes "
-        f"({len(f.invalid)} not weighed) &middot; {len(f.trucks)} trucks &middot; "
+        f"<p>{_when(f.since)} to {_when(f.until)} &middot; "
+        f"{n_of(len(f.passes), 'pass', 'passes')} ({len(f.invalid)} not weighed) &middot; "
+        f"{n_of(len(f.trucks), 'truck', 'trucks')} &middot; "
         f"<b id='total'>{f.total_kg / 1000:.1f} t</b> loaded"
         + (f" &middot; mean pass {sum(valid) / len(valid) / 1000:.1f} t" if valid else "")
         + "</p>",
@@ -125,7 +127,8 @@ def write_report(f: ShiftFigures, out: Path, title: str = "Shift report") -> Pat
     ]
     if r.get("trucks"):
         lines.append(
-            f"<p id='rule'>{r['trucks']} trucks, mean {r['mean_kg'] / 1000:.1f} t = "
+            f"<p id='rule'>{n_of(r['trucks'], 'truck', 'trucks')}, "
+            f"mean {r['mean_kg'] / 1000:.1f} t = "
             f"{r['mean_pct']} % of target; {r['over_110_pct']} % over 110 % (at most 10 % "
             f"allowed); {r['over_120']} over 120 % (none allowed): <b"
             + ("" if r["compliant"] else " class='bad'") + ">"
@@ -151,7 +154,7 @@ def write_report(f: ShiftFigures, out: Path, title: str = "Shift report") -> Pat
     if f.cycle_s:
         cs = sorted(f.cycle_s)
         lines.append(f"<p>Cycle time (dump to dump, same truck): median "
-                     f"{cs[len(cs) // 2]:.0f} s over {len(cs)} cycles.</p>")
+                     f"{cs[len(cs) // 2]:.0f} s over {n_of(len(cs), 'cycle', 'cycles')}.</p>")
     lines.append("<h2>Passes not weighed</h2>")
     if f.invalid:
         lines.append("<table id='invalid'><tr><th>pass</th><th>truck</th><th>ended</th>"

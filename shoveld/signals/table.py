@@ -20,6 +20,7 @@ from typing import Any, TextIO
 import numpy as np
 
 from shoveld.signals.columns import BY_NAME, COLUMN_NAMES, FORMAT_NAME
+from shoveld.words import n_of
 
 
 class SignalsFormatError(ValueError):
@@ -92,7 +93,8 @@ class SignalsTable:
             if name in cols:
                 a = np.asarray(cols[name], dtype=float)
                 if a.shape != (n,):
-                    raise ValueError(f"column {name}: expected {n} values, got {a.shape}")
+                    raise ValueError(f"column {name}: expected {n_of(n, 'value', 'values')}, "
+                                     f"got {a.shape}")
                 out[name] = a
             else:
                 out[name] = np.full(n, np.nan)

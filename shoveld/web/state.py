@@ -15,6 +15,7 @@ from collections.abc import Callable
 from typing import Any
 
 from shoveld.cli.cab import CabState, ShovelView
+from shoveld.words import n_of
 
 SILENT_AFTER_S = 3.0
 """A shovel not heard from for this long is shown as silent (health comes every 1 s)."""
@@ -46,7 +47,7 @@ def last_pass_hint(total_kg: float, target_kg: float, recent_kg: list[float]) ->
                         f"(at most {limit / 1000:.1f} t)"}
     each = remaining / left
     return {"kind": "more", "remaining_kg": remaining, "passes_left": left, "carry_kg": each,
-            "text": f"{left} passes left, about {each / 1000:.1f} t each"}
+            "text": f"{n_of(left, 'pass', 'passes')} left, about {each / 1000:.1f} t each"}
 
 
 def truck_warning(truck: dict[str, Any] | None) -> dict[str, str] | None:

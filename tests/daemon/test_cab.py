@@ -73,6 +73,20 @@ def test_screen_warns_of_overload_and_words_the_shift_honestly() -> None:
     assert "truck 4: 1 pass," in screen  # not "1 passes"
 
 
+def test_the_first_truck_of_a_shift_is_one_truck() -> None:
+    """After the first truck is sent off, the shift lines say "1 truck", "1 pass"."""
+    state = CabState()
+    rule = {"trucks": 1, "mean_pct": 101.5, "over_110_pct": 0.0, "over_120": 0,
+            "compliant": True}
+    state.on_message("s7", "truck", {"truck": 1, "passes": 1, "total_kg": 138000.0,
+                                     "target_kg": 136000.0, "fill_pct": 101.5, "status": "ok",
+                                     "closed": True, "rule_10_10_20": rule,
+                                     "shift": {"trucks": 1, "passes": 1, "kg": 138000.0}})
+    screen = state.screen()
+    assert "shift so far: 1 truck, 1 pass, 138.0 t" in screen
+    assert "shift: 1 truck, mean fill 101.5 %" in screen  # not "1 trucks"
+
+
 def test_line_mode_and_tty_mode() -> None:
     state = CabState()
     fill(state)

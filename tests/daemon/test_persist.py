@@ -91,7 +91,7 @@ def test_passes_export(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> No
     assert "truck    2: 2 passes" in text and "(open)" in text
     assert main(["passes", "--state-dir", str(tmp_path)]) == 0
     text = capsys.readouterr().out
-    assert "10/10/20 over 1 closed trucks" in text
+    assert "10/10/20 over 1 closed truck:" in text  # not "1 closed trucks"
     assert main(["passes", "--state-dir", str(tmp_path / "empty")]) == 2
     assert "no pass log" in capsys.readouterr().err
 

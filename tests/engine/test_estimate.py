@@ -104,7 +104,7 @@ def test_calibrate_takes_scale_verified_passes_with_the_trials(
     assert main(["calibrate", "--out", p0, e, l]) == 0
     assert main(["calibrate", "--out", p1, e, l, "--verified", v]) == 0
     err = capsys.readouterr().err
-    assert "identified with 6 verified passes of 6" in err
+    assert "identified with 6 verified passes of 6 in 1 table" in err
     trials, both = load_params(p0), load_params(p1)
     used = {Path(k).name: x for k, x in both.fit["excluded"].items()}
     assert set(used) == {"e.csv", "l.csv", "v.csv (verified passes)"}, used
@@ -173,3 +173,11 @@ def test_an_abandoned_cycle_leaves_no_gap_in_pass_numbers(params: ModelParams,
     assert phases[:4] == ["idle", "dig", "lift", "idle"], phases[:6]
     assert [p.index for p in passes] == list(range(1, len(cycles.passes) + 1))
     assert all(p.valid for p in passes)
+
+
+def test_sim_of_one_pass_says_one_pass(tmp_path: Path,
+                                       capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "one.csv"
+    assert main(["sim", "--passes", "1", "--seed", "3", "--out", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert " samples, " in said and ", 1 pass) and " in said, said  # not "1 passes"

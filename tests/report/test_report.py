@@ -81,3 +81,28 @@ def test_report_of_a_period_and_of_an_empty_log(tmp_path: Path, capsys) -> None:
     assert main(["report", "--db", str(tmp_path / "none.sqlite"), "--out",
                  str(tmp_path / "r4")]) == 2
     assert "none.sqlite" in capsys.readouterr().err
+
+
+def test_one_truck_and_one_pass_are_said_in_the_singular(tmp_path: Path, capsys) -> None:
+    """The first truck of a shift (two passes, one dump-to-dump cycle), then a period
+    holding only its last pass: "1 truck", "1 cycle", "1 pass", never "1 trucks"."""
+    log = PassLog(db_path(tmp_path), "s1")
+    for n, t in ((1, T0), (2, T0 + 50.0)):
+        p = {"pass": n, "truck": 1, "payload_kg": 68000.0, "std_kg": 300.0,
+             "start_s": t - T0, "end_s": t - T0 + 20, "samples": 500, "valid": True,
+             "reason": ""}
+        log.write_pass(p, t, t + 20.0, TARGET)
+    log.close_truck(1, TARGET, T0 + 100.0)
+    log.close()
+    db = db_path(tmp_path)
+    assert main(["report", "--db", str(db), "--out", str(tmp_path / "a")]) == 0
+    assert "(2 passes, 1 truck, 136.0 t)" in capsys.readouterr().out
+    page = (tmp_path / "a" / "index.html").read_text()
+    assert "2 passes (0 not weighed) &middot; 1 truck &middot;" in page
+    assert "<p id='rule'>1 truck, mean 136.0 t" in page
+    assert "over 1 cycle.</p>" in page
+    assert main(["report", "--db", str(db), "--out", str(tmp_path / "b"), "--since",
+                 str(T0 + 60.0)]) == 0
+    assert "(1 pass, 1 truck, 68.0 t)" in capsys.readouterr().out
+    page = (tmp_path / "b" / "index.html").read_text()
+    assert "1 pass (0 not weighed) &middot; 1 truck &middot;" in page

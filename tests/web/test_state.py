@@ -14,6 +14,7 @@ def test_last_pass_hint_tops_off_without_passing_110_percent() -> None:
     assert "26.0 t" in h["text"] and "39.6 t" in h["text"]
     more = last_pass_hint(40_000.0, 136_000.0, [30_000.0] * 5)
     assert more["kind"] == "more" and more["passes_left"] == 4
+    assert more["text"].startswith("4 passes left, about 24.0 t each")
     assert more["carry_kg"] * 4 == pytest.approx(96_000.0)
     assert last_pass_hint(137_000.0, 136_000.0, [30_000.0])["kind"] == "full"
     assert last_pass_hint(0.0, 136_000.0, [])["kind"] == "unknown"

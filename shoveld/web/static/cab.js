@@ -66,7 +66,7 @@ function render(snap) {
   $("trucks").innerHTML = s.closed.map(c =>
     `<tr><td>${c.truck}</td><td>${c.passes}</td><td>${(c.total_kg / 1000).toFixed(1)}</td><td>${c.fill_pct} %</td><td>${screen.esc(c.status)}</td></tr>`).join("");
   const r = s.rule;
-  $("shift").textContent = r ? `${r.trucks} trucks, mean ${r.mean_pct} % of target, ${r.over_110_pct} % over 110 %, ${r.over_120} over 120 % — ` +
+  $("shift").textContent = r ? `${screen.n(r.trucks, "truck", "trucks")}, mean ${r.mean_pct} % of target, ${r.over_110_pct} % over 110 %, ${r.over_120} over 120 % — ` +
     (r.compliant ? "within the 10/10/20 rule" : "OUTSIDE the 10/10/20 rule") : "no truck closed yet";
   drawArm(s.joints);
 }

@@ -5,6 +5,8 @@ const screen = {
   socketUp: false,
   shown: {},            // pass number -> Date.now() when it first appeared (latency bench)
   t(kg, digits = 1) { return kg === null || kg === undefined ? "-" : (kg / 1000).toFixed(digits) + " t"; },
+  // A count with its noun as a person writes it, "1 pass" / "2 passes" (as shoveld/words.py).
+  n(k, one, many) { return `${k} ${k === 1 ? one : many}`; },
   esc(s) { return String(s ?? "").replace(/[&<>"]/g, c => ({"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;"}[c])); },
   connect(render) {
     const url = (location.protocol === "https:" ? "wss://" : "ws://") + location.host + "/ws";

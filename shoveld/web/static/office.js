@@ -1,6 +1,5 @@
 // The mine office page: one card per shovel on the Zenoh network.
 "use strict";
-const n = (k, one, many) => `${k} ${k === 1 ? one : many}`;
 function card(s) {
   const tr = s.truck || {};
   const state = s.silent ? `<span class="silent-tag">SILENT${s.age_s != null ? " for " + s.age_s.toFixed(0) + " s" : ""}</span>`
@@ -9,8 +8,8 @@ function card(s) {
   return `<section class="panel card${s.silent ? " silent" : ""}" data-shovel="${screen.esc(s.shovel)}">
     <h2>${screen.esc(s.shovel)} ${state}</h2>
     <div>live payload: <b class="live">${live}</b></div>
-    <div>truck ${tr.truck ?? "-"}: <b class="truck">${screen.t(tr.total_kg)}</b> of ${screen.t(tr.target_kg, 0)}, ${n(tr.passes ?? 0, "pass", "passes")}</div>
-    <div>this shift: <b class="shift">${n(s.shift.passes, "pass", "passes")}, ${screen.t(s.shift.kg)}</b> in ${n(s.shift.trucks, "truck", "trucks")}</div>
+    <div>truck ${tr.truck ?? "-"}: <b class="truck">${screen.t(tr.total_kg)}</b> of ${screen.t(tr.target_kg, 0)}, ${screen.n(tr.passes ?? 0, "pass", "passes")}</div>
+    <div>this shift: <b class="shift">${screen.n(s.shift.passes, "pass", "passes")}, ${screen.t(s.shift.kg)}</b> in ${screen.n(s.shift.trucks, "truck", "trucks")}</div>
     <div class="problems">${s.problems.map(screen.esc).join("<br>")}</div>
   </section>`;
 }
@@ -22,7 +21,7 @@ function render(snap) {
   if (!snap) return;
   document.getElementById("cards").innerHTML = snap.shovels.map(card).join("");
   const silent = snap.shovels.filter(s => s.silent).length;
-  document.getElementById("summary").textContent = `${snap.shovels.length} shovels, ${silent} silent`;
+  document.getElementById("summary").textContent = `${screen.n(snap.shovels.length, "shovel", "shovels")}, ${silent} silent`;
   document.getElementById("link").textContent = snap.link === "up" ? "link up" : "link down";
 }
 screen.theme();
