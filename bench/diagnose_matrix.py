@@ -13,7 +13,8 @@ and sensor noise; then the diagnosis. Prints
   of the 35 t rated load), over the seeds.
 
     .venv/bin/python bench/diagnose_matrix.py [--seeds 6] [--null 20] [--pairs 10]
-                                              [--passes 24] [--jobs 2] [--json out.json]
+                                              [--pair-effects NAME,...] [--passes 24]
+                                              [--jobs 2] [--json out.json]
 """
 
 from __future__ import annotations
@@ -107,6 +108,9 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=6, help="seeds per effect")
     ap.add_argument("--null", type=int, default=20, help="seeds without any effect")
     ap.add_argument("--pairs", type=int, default=10, help="random pairs of effects")
+    ap.add_argument("--pair-effects", default="", metavar="NAME,...",
+                    help="draw the pairs among these effects only (e.g. those whose typical "
+                         "range moves the payload by >= 0.5 %% of rated on its own)")
     ap.add_argument("--passes", type=int, default=24)
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--json", help="write all cases to this file")
@@ -134,7 +138,13 @@ def main() -> None:
     for s in range(args.null):
         jobs.append({"kind": "null", "truth": "none", "spec": {}, "seed": 500 + s,
                      "passes": args.passes})
-    pairs = list(itertools.combinations([n for n in names if n not in MODELLED_BY_BASE], 2))
+    pool = [n for n in (args.pair_effects.split(",") if args.pair_effects else names)
+            if n not in MODELLED_BY_BASE]
+    unknown = [n for n in pool if n not in SIM_EFFECTS]
+    if unknown:
+        raise SystemExit(f"--pair-effects: unknown effect(s) {unknown}; expected some of "
+                         f"{names}")
+    pairs = list(itertools.combinations(pool, 2))
     for s, k in enumerate(rng.choice(len(pairs), size=min(args.pairs, len(pairs)),
                                      replace=False)):
         a, b = pairs[int(k)]
@@ -187,10 +197,11 @@ def main() -> None:
         return bool(r["found"]) and r["found"][0] == r["truth"]
 
     hits = sum(1 for r in single if right(r))
-    print(f"named first correctly: {hits}/{len(single)} ({100 * hits / len(single):.0f} %)")
+    ns = max(1, len(single))
+    print(f"named first correctly: {hits}/{len(single)} ({100 * hits / ns:.0f} %)")
     extra = [r for r in single if any(n != r["truth"] for n in r["found"])]
     print(f"extra names (a name that is not the hidden effect): {len(extra)}/{len(single)} "
-          f"({100 * len(extra) / len(single):.0f} %)"
+          f"({100 * len(extra) / ns:.0f} %)"
           + ("".join(f"\n  {r['truth']} (seed {r['seed']}): {r['found']}" for r in extra)))
 
     null = [r for r in results if r["kind"] == "null"]
@@ -216,7 +227,7 @@ def main() -> None:
 
     pair_rows = [r for r in results if r["kind"] == "pair"]
     alone = {(r["pair"], r["truth"]): r["base_rms"] for r in results if r["kind"] == "alone"}
-    both = ordered = 0
+    both = ordered = one_first = extras = 0
     sized: list[bool] = []  # both effects of a pair at the issue's size (>= 0.5 % of rated)
     print(f"\nPairs of effects ({len(pair_rows)}):")
     for r in pair_rows:
@@ -228,6 +239,8 @@ def main() -> None:
         in_order = got_both and r["found"][:2] == size
         both += got_both
         ordered += in_order
+        one_first += bool(r["found"]) and r["found"][0] in (a, b)
+        extras += any(n not in (a, b) for n in r["found"])
         if null and all(alone[(r["truth"], n)] ** 2 - floor**2 >= (0.005 * RATED) ** 2
                         for n in (a, b)):
             sized.append(got_both)
@@ -237,7 +250,8 @@ def main() -> None:
     if pair_rows:
         print(f"both found: {both}/{len(pair_rows)} ({100 * both / len(pair_rows):.0f} %), "
               f"both and in order of payload impact: {ordered}/{len(pair_rows)} "
-              f"({100 * ordered / len(pair_rows):.0f} %)")
+              f"({100 * ordered / len(pair_rows):.0f} %); one of the two named first: "
+              f"{one_first}/{len(pair_rows)}; a name that is neither: {extras}/{len(pair_rows)}")
         if null:
             print(f"of which both effects move the payload by >= 0.5 % of rated alone: both "
                   f"found {sum(sized)}/{len(sized)}")
@@ -247,6 +261,8 @@ def main() -> None:
           "extended RMS is at most half the base's or within 1.5 x the Cramer-Rao bound:")
     for t in names:
         row = [r for r in single if r["truth"] == t]
+        if not row:
+            continue
         b = np.array([r["base_rms"] for r in row])
         e = np.array([r["ext_rms"] for r in row])
         cut = sum(1 for r in row if r["ext_rms"] < r["base_rms"])

@@ -43,11 +43,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _summary(js: dict) -> str:
+    from shoveld.diagnose.report import added, finding_text
+
     lines = []
     if js["found"]:
         lines.append("found: " + ", ".join(js["found"]))
-        from shoveld.diagnose.report import finding_text
-
         for n in js["found"]:
             lines.append(f"  {n}: {js['causes'][n]}")
             for f in js["physical"].get(n, []):
@@ -62,7 +62,13 @@ def _summary(js: dict) -> str:
         score = 100 * (c["score"] or 0.0)
         sc = f"{score:+7.1f}%" if abs(score) < 1000 else f"{'unstable':>8s}"
         lines.append(f"{c['name']:26s} {sc} {t:>7s} {c['t_crit']:6.2f}  "
-                     f"{'added' if c['name'] in js['found'] else (c['why'] or 'significant')}")
+                     f"{'added' if added(c['name'], js['found']) else (c['why'] or 'significant')}")
+    for st in js["steps"]:
+        for c in st.get("pairs", []):
+            after = f" after {', '.join(st['model'])}" if st["model"] else ""
+            lines.append(f"tried together{after}: {c['name']} "
+                         f"({100 * (c['score'] or 0.0):+.1f}%, t {c['t'] or 0.0:.2f}): "
+                         f"{'added' if added(c['name'], js['found']) else c['why']}")
     lines.append("")
     for tag in ("base", "extended"):
         e = js[tag]

@@ -49,6 +49,12 @@ def finding_text(f: dict[str, Any]) -> str:
     return f"{f['what']}: {f['value']:.3g} ± {f['std']:.2g}{unit}"
 
 
+def added(candidate: str, found: list[str]) -> bool:
+    """Was this candidate added? A pair tried together ("a+b", ``select._pair``) was when
+    both of its terms were."""
+    return all(n in found for n in candidate.split("+"))
+
+
 def cause(name: str) -> str:
     cls = TERMS[name]
     return str(getattr(cls, "cause", "") or cls.description)
@@ -64,7 +70,8 @@ def as_json(d: Diagnosis) -> dict[str, Any]:
         "physical": findings(d.extended_params, d.found),
         "ranked": [c.as_dict() for c in first],
         "steps": [{"model": s.model, "chosen": s.chosen,
-                   "candidates": [c.as_dict() for c in s.candidates]} for s in sel.steps],
+                   "candidates": [c.as_dict() for c in s.candidates],
+                   "pairs": [c.as_dict() for c in s.pairs]} for s in sel.steps],
     }
     for tag, ev, res in (("base", sel.base, d.base_residuals),
                          ("extended", sel.extended, d.extended_residuals)):
@@ -290,8 +297,9 @@ def write_report(d: Diagnosis, out_dir: str | Path) -> Path:
     lines += ["", "## Candidates (first step)", "",
               "| candidate | residual removed | t (critical) | held-out payload RMS | verdict |",
               "|---|---|---|---|---|"]
-    for c in js["ranked"]:
-        verdict = "**added**" if c["name"] in d.found else (c["why"] or "significant")
+    pairs = js["steps"][0]["pairs"] if js["steps"] else []
+    for c in js["ranked"] + pairs:
+        verdict = "**added**" if added(c["name"], d.found) else (c["why"] or "significant")
         score = 100 * (c["score"] or 0)
         removed = f"{score:+.1f} %" if abs(score) < 1000 else "unstable"
         lines.append(f"| `{c['name']}` | {removed} | "

@@ -49,6 +49,9 @@ class SelectionConfig:
     min_gain: float = 0.02
     """Smallest relative reduction of the held-out residual that counts as a finding."""
     max_effects: int = 3
+    pair_among: int = 3
+    """Where no candidate is significant alone, pairs among this many of those that fail
+    only the payload test are tried together (``_pair``); 0: never."""
     payload_alpha: float = 0.05
     """A candidate must cut the verified held-out passes' payload errors at this one-sided
     significance (t test on the squares or signed ranks of |e|, each at half of it;
@@ -94,6 +97,8 @@ class Step:
     model: list[str]
     candidates: list[CandidateScore]
     chosen: str | None
+    pairs: list[CandidateScore] = field(default_factory=list)
+    """Pairs tried together where no candidate qualified alone (``_pair``)."""
 
 
 @dataclass
@@ -171,10 +176,46 @@ def compare(dataset: DataSet, cur: Evaluation, cand: Evaluation, name: str, n_tr
     elif len(e0) and worse > cfg.payload_tolerance * cal:
         why = (f"does not pay (held-out payload RMS {worse:+.0f} kg, more than "
                f"{cfg.payload_tolerance:g} x its calibration uncertainty {cal:.0f} kg)")
-    hyper = {k: v for k, v in cand.hyper().get(name, {}).items()}
+    hyper = ({n: dict(cand.hyper().get(n, {})) for n in name.split("+")} if "+" in name
+             else dict(cand.hyper().get(name, {})))
     return CandidateScore(name, gain, t, t_crit, n, _rms(e1),
                           float(e1.mean()) if len(e1) else math.nan, ratio, not why, why,
                           hyper, cand.cross_validated)
+
+
+PAYLOAD_ONLY = "does not pay on the payload"
+
+
+def _pair(dataset: DataSet, cur: Evaluation, scores: list[CandidateScore],
+          cfg: SelectionConfig, n_single: int, fit: Any
+          ) -> tuple[CandidateScore | None, list[CandidateScore]]:
+    """Two candidates that each take their share of the residual but fail the payload
+    test alone are tried together: where two effects act at once, a model with one of
+    them moves the payload towards the other's error, and only both in the model show
+    the gain. The pairs among the best ``cfg.pair_among`` such candidates are tried, with
+    the Bonferroni correction counting them beside the single candidates. Each term of a
+    pair must also earn its place beside the other, by the residual tests a next step
+    would apply (significant, and at least ``min_gain`` of what the other leaves): else a
+    term that fails the payload test for want of passes would bring in a passenger."""
+    held = [s for s in scores if s.why.startswith(PAYLOAD_ONLY)][:cfg.pair_among]
+    pairs = [(a, b) for k, a in enumerate(held) for b in held[k + 1:]]
+    n_tried = n_single + len(pairs)
+    best: CandidateScore | None = None
+    tried: list[CandidateScore] = []
+    for a, b in pairs:
+        names = [a.name, b.name]
+        both = fit(names)
+        s = compare(dataset, cur, both, "+".join(names), n_tried, cfg)
+        for one, other in ((a.name, b.name), (b.name, a.name)):
+            inc = compare(dataset, fit([other]), both, one, n_tried, cfg)
+            if s.significant and not (inc.t > inc.t_crit and inc.gain >= cfg.min_gain):
+                s.significant = False
+                s.why = (f"{one} adds {100 * inc.gain:.1f} % (t {inc.t:.2f}) to {other}: "
+                         f"not significant beside it")
+        tried.append(s)
+        if s.significant and (best is None or s.gain > best.gain):
+            best = s
+    return best, tried
 
 
 def forward_select(dataset: DataSet, library: list[str], sigma0: np.ndarray,
@@ -214,8 +255,17 @@ def forward_select(dataset: DataSet, library: list[str], sigma0: np.ndarray,
         scores.sort(key=lambda s: -s.gain if math.isfinite(s.gain) else math.inf)
         sig = [s for s in scores if s.significant]
         chosen = sig[0].name if sig else None
-        steps.append(Step(list(current), scores, chosen))
-        if chosen is None:
+        added = [chosen] if chosen else []
+        tried_pairs: list[CandidateScore] = []
+        if not sig and len(current) + 2 <= cfg.max_effects:
+            pair, tried_pairs = _pair(
+                dataset, cur, scores, cfg, len(todo),
+                lambda names, now=current, parent=cur: ev([*now, *names], parent))
+            if pair is not None:
+                added = pair.name.split("+")
+                chosen = pair.name
+        steps.append(Step(list(current), scores, chosen, tried_pairs))
+        if not added:
             break
-        current = [*current, chosen]
+        current = [*current, *added]
     return Selection(list(current), steps, base, ev(current), cache)

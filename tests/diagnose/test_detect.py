@@ -6,6 +6,8 @@ typical range; ``bench/diagnose_matrix.py`` runs many seeds for the detection ma
 
 from __future__ import annotations
 
+import zlib
+
 import numpy as np
 import pytest
 
@@ -63,3 +65,25 @@ def test_two_effects_are_both_found_larger_first() -> None:
     calib, measured, _ = session({"swing_centrifugal": 4.0, "hoist_rope_mass": 140.0}, 5150)
     d = diagnose(calib, measured, engine=False)
     assert d.found[:2] == ["swing_centrifugal", "hoist_rope_mass"], d.found
+
+
+def test_two_effects_that_each_fail_the_payload_alone_are_added_together() -> None:
+    """Saturation and the swing's centrifugal load at once: with either term alone the
+    payload still carries the other's error, so neither pays on its own (measured on the
+    bench's pairs, docs/diagnosis.md); tried together (``select._pair``) both are named
+    and the payload improves. Magnitudes and seed drawn as for the single effects."""
+    spec = {n: draw(n)[0] for n in ("current_saturation", "swing_centrifugal")}
+    seed = zlib.crc32("+".join(spec).encode()) % 100_000
+    calib, measured, _ = session(spec, seed)
+    d = diagnose(calib, measured, engine=False)
+    assert set(d.found[:2]) == set(spec), d.found
+    assert d.payload("extended")["rms_kg"] < d.payload("base")["rms_kg"]
+
+
+def test_a_pair_reads_as_added_only_when_both_of_its_terms_are() -> None:
+    from shoveld.diagnose.report import added
+
+    assert added("swing_centrifugal+current_saturation",
+                 ["swing_centrifugal", "current_saturation"])
+    assert not added("swing_centrifugal+current_saturation", ["swing_centrifugal"])
+    assert added("ground_slope", ["ground_slope"]) and not added("ground_slope", [])
