@@ -67,11 +67,11 @@ def test_two_effects_are_both_found_larger_first() -> None:
     assert d.found[:2] == ["swing_centrifugal", "hoist_rope_mass"], d.found
 
 
-def test_two_effects_that_each_fail_the_payload_alone_are_added_together() -> None:
-    """Saturation and the swing's centrifugal load at once: with either term alone the
-    payload still carries the other's error, so neither pays on its own (measured on the
-    bench's pairs, docs/diagnosis.md); tried together (``select._pair``) both are named
-    and the payload improves. Magnitudes and seed drawn as for the single effects."""
+def test_saturation_and_the_swing_at_once_are_both_named() -> None:
+    """Saturation and the swing's centrifugal load at once, magnitudes and seed drawn as
+    for the single effects: both are named and the payload improves. Here the swing pays
+    alone and the saturation follows (on some bench machines neither pays alone and the
+    two are added together, ``select._pair``; test_select.py tests that rule)."""
     spec = {n: draw(n)[0] for n in ("current_saturation", "swing_centrifugal")}
     seed = zlib.crc32("+".join(spec).encode()) % 100_000
     calib, measured, _ = session(spec, seed)

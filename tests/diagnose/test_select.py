@@ -1,0 +1,63 @@
+"""The selection's rule for two effects at once (``select._pair``), on made-up scores.
+
+Simulated sessions exercise the whole diagnosis (test_detect.py); here the held-out
+losses and payloads of each model are set by hand, so the rule itself is what is tested:
+two candidates that fail only the payload test are added together when the pair pays,
+and a candidate that adds nothing beside the other is not brought in as a passenger.
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+
+from shoveld.diagnose.select import SelectionConfig, _pair, compare
+
+N = 16
+SIGN = np.where(np.arange(N) % 2 == 0, 1.0, -1.0)
+
+
+def model(loss: float, payload_err_kg: float) -> Any:
+    """Held-out scores of one model: about the same loss and payload error on every pass
+    (a spread of 2 % and 10 % of their own)."""
+    rng = np.random.default_rng(int(1000 * loss + payload_err_kg))
+    scores = {i: SimpleNamespace(loss=loss * (1.0 + 0.02 * rng.standard_normal()),
+                                 calib_std_kg=10.0,
+                                 payload_kg=10_000.0 + SIGN[i] * payload_err_kg
+                                 * (1.0 + 0.1 * rng.standard_normal()))
+              for i in range(N)}
+    return SimpleNamespace(scores=scores, hyper=lambda: {}, cross_validated=False)
+
+
+DATA = SimpleNamespace(passes=[SimpleNamespace(index=i, verified=True, payload_kg=10_000.0)
+                               for i in range(N)])
+
+
+def run(models: dict[tuple[str, ...], Any]) -> tuple[Any, list[Any]]:
+    cfg = SelectionConfig()
+    cur = models[()]
+    singles = [compare(DATA, cur, models[(n,)], n, 3, cfg) for n in ("a", "b", "c")]
+    assert all(s.why.startswith("does not pay on the payload") for s in singles), singles
+    return _pair(DATA, cur, singles, cfg, 3, lambda names: models[tuple(sorted(names))])
+
+
+def test_two_that_fail_the_payload_alone_are_added_together_when_the_pair_pays() -> None:
+    best, tried = run({(): model(1.0, 400.0), ("a",): model(0.5, 420.0),
+                       ("b",): model(0.8, 450.0), ("c",): model(0.9, 430.0),
+                       ("a", "b"): model(0.4, 50.0), ("a", "c"): model(0.45, 380.0),
+                       ("b", "c"): model(0.75, 420.0)})
+    assert best is not None and set(best.name.split("+")) == {"a", "b"}
+    assert len(tried) == 3 and sum(t.significant for t in tried) == 1
+
+
+def test_a_term_that_adds_nothing_beside_the_other_is_no_passenger() -> None:
+    # c pays together with a, but beside a it removes 1 % of what a leaves
+    best, tried = run({(): model(1.0, 400.0), ("a",): model(0.5, 420.0),
+                       ("b",): model(0.8, 450.0), ("c",): model(0.97, 410.0),
+                       ("a", "b"): model(0.5, 420.0), ("a", "c"): model(0.495, 50.0),
+                       ("b", "c"): model(0.78, 440.0)})
+    assert best is None
+    ac = next(t for t in tried if set(t.name.split("+")) == {"a", "c"})
+    assert "c adds" in ac.why and "not significant beside it" in ac.why
