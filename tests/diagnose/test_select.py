@@ -61,3 +61,25 @@ def test_a_term_that_adds_nothing_beside_the_other_is_no_passenger() -> None:
     assert best is None
     ac = next(t for t in tried if set(t.name.split("+")) == {"a", "c"})
     assert "c adds" in ac.why and "not significant beside it" in ac.why
+
+
+def test_the_summary_lists_a_pair_and_reads_its_terms_as_added() -> None:
+    from shoveld.cli.diagnose import _summary
+
+    def cand(name: str, score: float, why: str) -> dict[str, Any]:
+        return {"name": name, "score": score, "t": 9.0, "t_crit": 3.4, "why": why}
+
+    pay = {"passes": 1, "mean_kg": 10.0, "mean_pct_rated": 0.03, "rms_kg": 224.0,
+           "rms_pct_rated": 0.64}
+    js = {"found": ["a", "b"], "causes": {"a": "cause a", "b": "cause b"}, "physical": {},
+          "ranked": [cand("a", 0.87, "does not pay on the payload"),
+                     cand("b", 0.35, "does not pay on the payload")],
+          "steps": [{"model": [], "pairs": [cand("a+b", 0.88, "")]},
+                    {"model": ["a", "b"], "pairs": []}],
+          **{tag: {"payload": pay, "residual_rms": {"hoist_A": 5.0, "crowd_A": 3.0}}
+             for tag in ("base", "extended")}}
+    text = _summary(js)
+    assert "tried together: a+b (+88.0%, t 9.00): added" in text
+    assert [ln.split()[-1] for ln in text.splitlines() if ln.startswith(("a ", "b "))] == \
+        ["added", "added"]
+    assert "held-out payload (1 verified pass)" in text
