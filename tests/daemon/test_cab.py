@@ -52,6 +52,19 @@ def test_screen_shows_live_passes_truck_and_problems() -> None:
     assert "no valid estimate" in state.screen()
 
 
+def send_off(state: CabState, truck: int, passes: int, total_kg: float, status: str,
+             mean_pct: float, shift: tuple[int, int, float]) -> None:
+    """A truck sent off, as the daemon publishes it: with the shift's 10/10/20 summary
+    (no truck over 110 %) and its totals (trucks, passes, kg)."""
+    rule = {"trucks": shift[0], "mean_pct": mean_pct, "over_110_pct": 0.0, "over_120": 0,
+            "compliant": True}
+    state.on_message("s7", "truck", {
+        "truck": truck, "passes": passes, "total_kg": total_kg, "target_kg": 136000.0,
+        "fill_pct": round(100.0 * total_kg / 136000.0, 1), "status": status, "closed": True,
+        "rule_10_10_20": rule,
+        "shift": {"trucks": shift[0], "passes": shift[1], "kg": shift[2]}})
+
+
 def test_screen_warns_of_overload_and_words_the_shift_honestly() -> None:
     state = CabState()
     fill(state)
@@ -60,12 +73,8 @@ def test_screen_warns_of_overload_and_words_the_shift_honestly() -> None:
                                      "status": "over_110"})
     screen = state.screen()
     assert "!! Over 110 %" in screen and "over target by 15000 kg" in screen
-    rule = {"trucks": 6, "mean_pct": 34.0, "over_110_pct": 0.0, "over_120": 0,
-            "compliant": True}
-    state.on_message("s7", "truck", {"truck": 4, "passes": 1, "total_kg": 46000.0,
-                                     "target_kg": 136000.0, "fill_pct": 33.8, "status": "under",
-                                     "closed": True, "rule_10_10_20": rule,
-                                     "shift": {"trucks": 6, "passes": 31, "kg": 277000.0}})
+    send_off(state, truck=4, passes=1, total_kg=46000.0, status="under", mean_pct=34.0,
+             shift=(6, 31, 277000.0))
     screen = state.screen()
     assert "shift so far: 6 trucks, 31 passes, 277.0 t" in screen
     assert "sent off, UNDER" in screen and "Left under-loaded" in screen
@@ -76,12 +85,8 @@ def test_screen_warns_of_overload_and_words_the_shift_honestly() -> None:
 def test_the_first_truck_of_a_shift_is_one_truck() -> None:
     """After the first truck is sent off, the shift lines say "1 truck", "1 pass"."""
     state = CabState()
-    rule = {"trucks": 1, "mean_pct": 101.5, "over_110_pct": 0.0, "over_120": 0,
-            "compliant": True}
-    state.on_message("s7", "truck", {"truck": 1, "passes": 1, "total_kg": 138000.0,
-                                     "target_kg": 136000.0, "fill_pct": 101.5, "status": "ok",
-                                     "closed": True, "rule_10_10_20": rule,
-                                     "shift": {"trucks": 1, "passes": 1, "kg": 138000.0}})
+    send_off(state, truck=1, passes=1, total_kg=138000.0, status="ok", mean_pct=101.5,
+             shift=(1, 1, 138000.0))
     screen = state.screen()
     assert "shift so far: 1 truck, 1 pass, 138.0 t" in screen
     assert "shift: 1 truck, mean fill 101.5 %" in screen  # not "1 trucks"
