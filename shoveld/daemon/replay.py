@@ -53,6 +53,9 @@ class ReplayRun:
             down = [n for n, d in svc.drivers.items() if not d.health.connected]
             log.warning("replay: drivers %s not connected after %.0f s; playing anyway", down,
                         connect_timeout_s)
+        limit = getattr(self.session, "limit", None)
+        if limit is not None:  # a feed that works ahead of the ticks must know where to stop
+            limit(until_s)
         t_cpu, t_real = time.process_time(), time.monotonic()
         t0 = svc.clock.now()
         clock = svc.clock
@@ -94,9 +97,13 @@ def _installation(cap: Any, default: Installation) -> Installation:
 
 
 def fast_replay_service(capture_dir: str | Path, cfg: DaemonConfig, params: ModelParams, *,
-                        record_stats: bool = False, close_truck_at_end: bool = True
-                        ) -> ReplayRun:
-    """The service on :class:`SyncReplay`: deterministic, as fast as the engine allows."""
+                        record_stats: bool = False, close_truck_at_end: bool = True,
+                        bulk: bool = True) -> ReplayRun:
+    """The service on the drivers' in-memory transports: deterministic, as fast as the
+    engine allows. ``bulk``: each device decoded alone and the samples built with numpy
+    ahead of the ticks (:mod:`shoveld.daemon.bulkfeed`); else the drivers, the store
+    and the assembler run inside each tick (:class:`SyncReplay`), as live. Both give the
+    same samples and passes (tests/daemon/test_bulkfeed.py)."""
     from drivers.capture.format import read_capture
 
     cap = read_capture(Path(capture_dir))
@@ -106,15 +113,26 @@ def fast_replay_service(capture_dir: str | Path, cfg: DaemonConfig, params: Mode
         d["kind"] = dev.kind
         devices[name] = DeviceConfig(name, dev.kind, d, cfg.loop.max_age_s,
                                      device_signals(dev.kind, d))
-    sync = SyncReplay(capture_dir, devices)
+    sync = SyncReplay(cap, devices)
     rcfg = dataclasses.replace(cfg, devices=devices,
                                installation=_installation(sync.capture, cfg.installation))
-    svc = Service(rcfg, params, clock=SimClock(0.0, float(cap.start_unix)),
-                  driver_clock=sync.clock, drivers=sync.drivers, driver_threads=False,
-                  before_tick=sync.step, record_stats=record_stats,
+    clock = SimClock(0.0, float(cap.start_unix))
+    if not bulk:
+        svc = Service(rcfg, params, clock=clock, driver_clock=sync.clock, drivers=sync.drivers,
+                      driver_threads=False, before_tick=sync.step, record_stats=record_stats,
+                      close_truck_at_end=close_truck_at_end)
+        sync.attach({n: svc.store.sink(n, threaded=False) for n in devices})  # one thread
+        return ReplayRun(svc, sync, None)
+    from drivers.base import DriverHealth
+    from shoveld.daemon.bulkfeed import BulkAssembler, BulkFeed, BulkSession, ReplayedDriver
+
+    drivers: dict[str, Any] = {n: ReplayedDriver(n, DriverHealth()) for n in devices}
+    svc = Service(rcfg, params, clock=clock, driver_clock=sync.clock, drivers=drivers,
+                  driver_threads=False, record_stats=record_stats,
                   close_truck_at_end=close_truck_at_end)
-    sync.attach({n: svc.store.sink(n, threaded=False) for n in devices})  # one thread
-    return ReplayRun(svc, sync, None)
+    feed = BulkFeed(sync, rcfg.installation, rcfg.loop.rate_hz, rcfg.loop.health_period_s)
+    svc.assembler = BulkAssembler(feed, drivers, svc.store)  # type: ignore[assignment]
+    return ReplayRun(svc, BulkSession(sync, svc.assembler), None)
 
 
 def replay_service(capture_dir: str | Path, cfg: DaemonConfig, params: ModelParams,

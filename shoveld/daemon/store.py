@@ -108,6 +108,11 @@ class ReadingStore:
         except IndexError:
             return None
 
+    def set_count(self, device: str, n: int) -> None:
+        """Say how many readings ``device`` has given: a feed that keeps its readings
+        elsewhere (bulk replay) still shows the health topic's count and rate."""
+        self._count[device] = n
+
     def count(self, device: str) -> int:
         """Readings received from ``device`` since start (for its sample rate)."""
         return self._count[device]

@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from drivers.base import Driver, Reading
+from drivers.capture.format import Capture
 from shoveld.daemon.config import DeviceConfig, build_driver
 
 log = logging.getLogger(__name__)
@@ -291,12 +292,13 @@ class SyncDevice:
 class SyncReplay:
     """All recorded devices of a capture as drivers on in-memory transports."""
 
-    def __init__(self, capture_dir: str | Path, devices: dict[str, DeviceConfig],
+    def __init__(self, capture_dir: str | Path | Capture, devices: dict[str, DeviceConfig],
                  clock: StepClock | None = None, answer_window_s: float = 0.05) -> None:
         from drivers.capture.format import CAN_KINDS, MODBUS_KINDS, SERIAL_KINDS, read_capture
         from drivers.capture.replay import RecordedAnswers, RecordedRegisters, split_answers
 
-        self.capture = read_capture(Path(capture_dir))
+        self.capture = (capture_dir if isinstance(capture_dir, Capture)  # already read
+                        else read_capture(Path(capture_dir)))
         self.clock = clock or StepClock(0.0)
         self.devices = devices
         self.drivers: dict[str, Driver] = {}
