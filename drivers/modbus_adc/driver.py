@@ -517,6 +517,13 @@ class ModbusAdcDriver(Driver):
             raise DeviceError(f"Modbus module at {self.config.endpoint} answered none of the "
                               f"last {failed} polls")
 
+    def idle(self, now: float) -> bool:
+        """True if :meth:`read` at ``now`` would change nothing: polling on its own schedule
+        and the next poll not due (the same test as ``_read_free``'s), so a replay that
+        steps the driver itself can skip the call."""
+        return (self.tick_hint is None and self._next_poll is not None
+                and now < self._next_poll and self._client is not None)
+
     def _read_free(self, sink: Sink) -> None:
         """One poll on the driver's own schedule (``poll_hz`` from the first poll)."""
         period = 1.0 / self.config.poll_hz
