@@ -1,0 +1,92 @@
+"""The capture readers' whole-file path reads what the line-by-line path reads.
+
+The recorder's line shapes are matched over the whole file at once; a file with any
+other line must be read (or refused, with its line named) exactly as the line-by-line
+reader does. Each case is read both ways and compared.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+import drivers.capture.format as fmt
+
+CAPTURES = Path(__file__).resolve().parents[2] / "hil_fixtures" / "captures"
+SERIAL_HEAD = '{"format":"shoveld-serial-chunks","version":1,"device":"x"}\n'
+MODBUS_HEAD = '{"format":"shoveld-modbus-reads","version":1,"device":"x"}\n'
+
+
+def _outcome(read: Callable[..., Iterator[Any]], path: Path, whole_file: bool
+             ) -> tuple[list[Any], str]:
+    """Records read before any error, and the error's text ('' if none)."""
+    got: list[Any] = []
+    try:
+        for r in read(path, whole_file):
+            got.append(r)
+    except fmt.CaptureFormatError as e:
+        return got, str(e)
+    return got, ""
+
+
+def _both_ways(read: Callable[..., Iterator[Any]], path: Path) -> tuple[Any, Any]:
+    return _outcome(read, path, True), _outcome(read, path, False)
+
+
+@pytest.mark.parametrize("path", sorted(CAPTURES.glob("*/*.jsonl")), ids=lambda p: p.name)
+def test_committed_recordings_read_alike(path: Path) -> None:
+    read = fmt.read_serial_chunks if path.name.endswith(".serial.jsonl") else \
+        fmt.read_modbus_reads
+    assert fmt._bulk_records(path, fmt.SERIAL_FORMAT if read is fmt.read_serial_chunks
+                             else fmt.MODBUS_FORMAT,
+                             fmt._SERIAL_LINE if read is fmt.read_serial_chunks
+                             else fmt._MODBUS_LINE) is not None  # the fast path is taken
+    whole, by_line = _both_ways(read, path)
+    assert whole == by_line and whole[0] and not whole[1]
+
+
+SERIAL_CASES = {
+    "canonical": '{"t":0.5,"d":"rx","hex":"0a0B"}\n{"t":1,"d":"tx","hex":""}\n',
+    "spaces": '{"t": 0.5, "d": "rx", "hex": "0a"}\n',
+    "two objects on a line": '{"t":0.5,"d":"rx","hex":"0a"},{"t":0.6,"d":"rx","hex":"0a"}\n',
+    "odd hex": '{"t":0.5,"d":"rx","hex":"0a0"}\n',
+    "back in time": '{"t":0.5,"d":"rx","hex":"0a"}\n{"t":0.4,"d":"rx","hex":"0a"}\n',
+    "huge exponent": '{"t":1e400,"d":"rx","hex":"0a"}\n',
+    "torn last line": '{"t":0.5,"d":"rx","hex":"0a"}\n{"t":0.6,"d":"rx","he',
+    "no final newline": '{"t":0.5,"d":"rx","hex":"0a"}',
+    "blank lines": '\n{"t":0.5,"d":"rx","hex":"0a"}\n  \n{"t":0.7,"d":"tx","hex":"0b"}\n',
+    "leading zero": '{"t":00.5,"d":"rx","hex":"0a"}\n',
+    "crlf": '{"t":0.5,"d":"rx","hex":"0a"}\r\n',
+    "other direction": '{"t":0.5,"d":"xx","hex":"0a"}\n',
+}
+MODBUS_CASES = {
+    "canonical": '{"t":0.1,"unit":1,"fc":4,"addr":0,"count":2,"regs":[0,65535]}\n'
+                 '{"t":0.2,"unit":1,"fc":4,"addr":0,"count":2,"error":"timeout"}\n'
+                 '{"t":0.3,"unit":1,"fc":3,"addr":9,"count":2,"error":"exception","code":4}\n',
+    "wrong count": '{"t":0.1,"unit":1,"fc":4,"addr":0,"count":3,"regs":[0,1]}\n',
+    "word too big": '{"t":0.1,"unit":1,"fc":4,"addr":0,"count":1,"regs":[65536]}\n',
+    "unit too big": '{"t":0.1,"unit":256,"fc":4,"addr":0,"count":1,"regs":[1]}\n',
+    "function 5": '{"t":0.1,"unit":1,"fc":5,"addr":0,"count":1,"regs":[1]}\n',
+    "code 0": '{"t":0.1,"unit":1,"fc":4,"addr":0,"count":1,"error":"exception","code":0}\n',
+    "count 0": '{"t":0.1,"unit":1,"fc":4,"addr":0,"count":0,"regs":[1]}\n',
+    "other error": '{"t":0.1,"unit":1,"fc":4,"addr":0,"count":1,"error":"crc"}\n',
+}
+
+
+@pytest.mark.parametrize("name", sorted(SERIAL_CASES))
+def test_serial_files_read_alike(name: str, tmp_path: Path) -> None:
+    p = tmp_path / "x.serial.jsonl"
+    p.write_bytes((SERIAL_HEAD + SERIAL_CASES[name]).encode())
+    whole, by_line = _both_ways(fmt.read_serial_chunks, p)
+    assert whole == by_line
+
+
+@pytest.mark.parametrize("name", sorted(MODBUS_CASES))
+def test_modbus_files_read_alike(name: str, tmp_path: Path) -> None:
+    p = tmp_path / "x.modbus.jsonl"
+    p.write_bytes((MODBUS_HEAD + MODBUS_CASES[name]).encode())
+    whole, by_line = _both_ways(fmt.read_modbus_reads, p)
+    assert whole == by_line
