@@ -1,19 +1,29 @@
 """Replay speed of the daemon on the committed capture, as a multiple of real time.
 
-* ``fast``: ``shoveld replay --fast`` in-process - the drivers' code on in-memory
-  transports stepped by the loop, then store, assembly, engine, pass log, Zenoh; with a
-  per-stage breakdown of the time per 10 ms tick;
+* ``fast``: ``shoveld replay --fast`` in-process - the bulk front end (each device's
+  driver on its in-memory transport, alone over a span of ticks; the span's samples
+  built with numpy), then the loop: engine, pass log, Zenoh. The breakdown splits the
+  time per 10 ms tick into the front end (per device, and the assembly) and the loop
+  (engine, and the rest: service, events, health); ``loop only`` is the speed of the
+  loop without the front end;
+* ``per-tick``: the same with the drivers, store and assembler inside every tick
+  (``fast_replay_service(..., bulk=False)``, the live daemon's order of work), run
+  interleaved with ``fast`` so both see the same machine;
+* ``--command``: the whole ``shoveld replay CAPTURE --fast`` as a subprocess (start,
+  imports, reading the capture, Zenoh session, the replay, shutdown), wall time;
 * ``stepped``: the drivers in their threads on the drivers' virtual hardware (ptys,
-  pymodbus TCP servers) on the stepped replay clock;
+  pymodbus TCP servers) on the stepped replay clock.
 
-Startup (imports, Zenoh session) is not counted; the figure is capture seconds played
-per wall second of the loop, the median of ``--repeat`` runs (the machine is shared:
-the spread is printed too). Nobody subscribes by default, so the loop topics (joints,
-live payload, health) are not encoded; ``--subscriber`` adds a Zenoh subscriber to every
-topic in this process, as a cab watching the replay would be.
+Startup (imports, Zenoh session) is not counted in ``fast`` and ``per-tick``; the
+figure is capture seconds played per wall second of ``ReplayRun.run`` (which includes
+the bulk front end: it works a span ahead of the ticks), the median of ``--repeat``
+runs (the machine is shared: the spread is printed too). Nobody subscribes by
+default, so the loop topics (joints, live payload, health) are not encoded;
+``--subscriber`` adds a Zenoh subscriber to every topic in this process, as a cab
+watching the replay would be.
 
-Usage: ``.venv/bin/python bench/daemon_replay.py [--repeat 5] [--stepped] [--subscriber]
-[--json]``
+Usage: ``.venv/bin/python bench/daemon_replay.py [--repeat 5] [--command] [--stepped]
+[--subscriber] [--json]``
 """
 
 from __future__ import annotations
@@ -51,7 +61,8 @@ def free_port() -> int:
         return int(s.getsockname()[1])
 
 
-def run_once(stepped: bool, breakdown: bool, subscriber: bool = False) -> dict[str, Any]:
+def run_once(stepped: bool, breakdown: bool, subscriber: bool = False, bulk: bool = True
+             ) -> dict[str, Any]:
     from shoveld.daemon.config import parse_config
     from shoveld.daemon.replay import fast_replay_service, replay_service
     from shoveld.model.params import load_params
@@ -64,7 +75,7 @@ def run_once(stepped: bool, breakdown: bool, subscriber: bool = False) -> dict[s
                            require_devices=False)
         params = load_params(PARAMS)
         rr = (replay_service(CAPTURE, cfg, params, None) if stepped
-              else fast_replay_service(CAPTURE, cfg, params))
+              else fast_replay_service(CAPTURE, cfg, params, bulk=bulk))
         svc = rr.service
         acc: dict[str, float] = {}
         passes: list[float] = []
@@ -83,13 +94,22 @@ def run_once(stepped: bool, breakdown: bool, subscriber: bool = False) -> dict[s
                     "shovel/bench/**", lambda s: received.__setitem__(0, received[0] + 1))
                 time.sleep(0.5)  # the subscription reaches the daemon
             if breakdown and not stepped:
-                for dev in rr.session._devs:
-                    dev.step = timed(acc, f"  driver {dev.name}", dev.step)
-                svc.before_tick = timed(acc, "drivers (parse, health)", svc.before_tick)
-                svc.assembler.sample = timed(acc, "assemble", svc.assembler.sample)
                 assert svc.engine is not None
                 svc.engine.step = timed(acc, "engine", svc.engine.step)
                 svc.publisher.put = timed(acc, "zenoh put", svc.publisher.put)
+                if bulk:
+                    feed = svc.assembler.feed  # type: ignore[attr-defined]
+                    for name in list(feed.devices):
+                        feed._devs[name].step = timed(acc, f"  driver {name}",
+                                                      feed._devs[name].step)
+                    feed._assemble = timed(acc, "  assembly (numpy)", feed._assemble)
+                    feed.spans = timed_spans(acc, "front end (drivers, assembly)", feed.spans)
+                    svc.assembler._spans = feed.spans()  # type: ignore[attr-defined]
+                else:
+                    for dev in rr.session._devs:
+                        dev.step = timed(acc, f"  driver {dev.name}", dev.step)
+                    svc.before_tick = timed(acc, "drivers (parse, health)", svc.before_tick)
+                    svc.assembler.sample = timed(acc, "assemble", svc.assembler.sample)
             fig = rr.run(threading.Event())
             svc.flush()
         finally:
@@ -104,12 +124,66 @@ def run_once(stepped: bool, breakdown: bool, subscriber: bool = False) -> dict[s
         fig["us_per_tick"]["rest (loop, events, health)"] = round(
             1e6 * (total - sum(v for k, v in acc.items() if not k.startswith(" ")))
             / fig["ticks"], 1)
+        front = acc.get("front end (drivers, assembly)")
+        if front is not None:
+            fig["loop_only_speed_x"] = round(fig["capture_s"] / (total - front), 1)
     return fig
+
+
+def timed_spans(acc: dict[str, float], name: str, spans: Callable[[], Any]
+                ) -> Callable[[], Any]:
+    """``spans`` (a generator function) with the time spent making each span counted."""
+    def wrapper() -> Any:
+        it = spans()
+        while True:
+            t0 = time.perf_counter()
+            try:
+                span = next(it)
+            except StopIteration:
+                return
+            finally:
+                acc[name] = acc.get(name, 0.0) + time.perf_counter() - t0
+            yield span
+    return wrapper
+
+
+def run_command(repeat: int) -> dict[str, Any]:
+    """Wall time of the whole ``shoveld replay CAPTURE --fast`` command, ``repeat`` runs."""
+    import statistics
+    import subprocess
+    import sys
+
+    walls = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        subprocess.run([sys.executable, "-m", "shoveld", "replay", str(CAPTURE), "--fast",
+                        "--listen", f"tcp/127.0.0.1:{free_port()}"], check=True,
+                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=ROOT)
+        walls.append(time.perf_counter() - t0)
+    from drivers.capture.format import read_capture
+
+    capture_s = read_capture(CAPTURE).duration_s()
+    med = statistics.median(walls)
+    return {"wall_s": round(med, 3), "all_wall_s": [round(w, 3) for w in walls],
+            "speed_x": round(capture_s / med, 1),
+            "all_speed_x": [round(capture_s / w, 1) for w in walls]}
+
+
+def _summary(runs: list[dict[str, Any]]) -> dict[str, Any]:
+    med = sorted(runs, key=lambda r: r["speed_x"])[len(runs) // 2]
+    return {"speed_x": med["speed_x"], "all_speed_x": [r["speed_x"] for r in runs],
+            "capture_s": med["capture_s"], "real_s": med["real_s"],
+            "cpu_s": med["cpu_s"], "passes_kg": med["passes_kg"],
+            "messages_received": med["messages_received"],
+            "same_passes_every_run": all(r["passes_kg"] == runs[0]["passes_kg"]
+                                         for r in runs)}
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--command", action="store_true",
+                    help="also the whole command (subprocess), --repeat runs")
     ap.add_argument("--stepped", action="store_true", help="also the threaded stepped replay")
     ap.add_argument("--subscriber", action="store_true",
                     help="a Zenoh subscriber to every topic (the loop topics are then encoded)")
@@ -117,15 +191,20 @@ def main() -> int:
     args = ap.parse_args()
     logging.basicConfig(level=logging.ERROR)
     out: dict[str, Any] = {}
-    runs = [run_once(False, False, args.subscriber) for _ in range(args.repeat)]
-    med = sorted(runs, key=lambda r: r["speed_x"])[len(runs) // 2]
-    out["fast"] = {"speed_x": med["speed_x"], "all_speed_x": [r["speed_x"] for r in runs],
-                   "capture_s": med["capture_s"], "real_s": med["real_s"],
-                   "cpu_s": med["cpu_s"], "passes_kg": med["passes_kg"],
-                   "messages_received": med["messages_received"],
-                   "same_passes_every_run": all(r["passes_kg"] == runs[0]["passes_kg"]
-                                                for r in runs)}
-    out["fast_breakdown_us_per_tick"] = run_once(False, True, args.subscriber)["us_per_tick"]
+    bulk, per_tick = [], []
+    for _ in range(args.repeat):  # interleaved: a burst of load hits both alike
+        bulk.append(run_once(False, False, args.subscriber))
+        per_tick.append(run_once(False, False, args.subscriber, bulk=False))
+    out["fast"] = _summary(bulk)
+    out["per_tick"] = _summary(per_tick)
+    out["same_passes_bulk_and_per_tick"] = out["fast"]["passes_kg"] == out["per_tick"]["passes_kg"]
+    b = run_once(False, True, args.subscriber)
+    out["fast_breakdown_us_per_tick"] = b["us_per_tick"]
+    out["fast_loop_only_speed_x"] = b["loop_only_speed_x"]
+    out["per_tick_breakdown_us_per_tick"] = run_once(False, True, args.subscriber,
+                                                     bulk=False)["us_per_tick"]
+    if args.command:
+        out["command"] = run_command(args.repeat)
     if args.stepped:
         r = run_once(True, False)
         out["stepped_threaded"] = {k: r[k] for k in ("speed_x", "capture_s", "real_s",
@@ -133,15 +212,26 @@ def main() -> int:
     if args.json:
         print(json.dumps(out))
         return 0
-    f = out["fast"]
-    print(f"fast replay: {f['speed_x']}x real time (median; runs {f['all_speed_x']}), "
-          f"{f['capture_s']} s of capture in {f['real_s']} s, {f['cpu_s']} s CPU; "
-          f"passes {f['passes_kg']}, identical every run: {f['same_passes_every_run']}"
-          + (f"; {f['messages_received']} messages to the subscriber" if args.subscriber
-             else ""))
-    print("per 10 ms tick (us, one more run with timers around each stage):")
+    for key, what in (("fast", "fast replay (bulk front end)"),
+                      ("per_tick", "fast replay, drivers in each tick")):
+        f = out[key]
+        print(f"{what}: {f['speed_x']}x real time (median; runs {f['all_speed_x']}), "
+              f"{f['capture_s']} s of capture in {f['real_s']} s, {f['cpu_s']} s CPU; "
+              f"passes {f['passes_kg']}, identical every run: {f['same_passes_every_run']}"
+              + (f"; {f['messages_received']} messages to the subscriber" if args.subscriber
+                 else ""))
+    print(f"same passes both ways: {out['same_passes_bulk_and_per_tick']}")
+    print("per 10 ms tick, bulk (us, one more run with timers around each stage; the loop "
+          f"alone, without the front end: {out['fast_loop_only_speed_x']}x):")
     for k, v in out["fast_breakdown_us_per_tick"].items():
         print(f"  {v:7.1f}  {k}")
+    print("per 10 ms tick, drivers in each tick (us):")
+    for k, v in out["per_tick_breakdown_us_per_tick"].items():
+        print(f"  {v:7.1f}  {k}")
+    if "command" in out:
+        c = out["command"]
+        print(f"whole command (shoveld replay --fast, subprocess): {c['speed_x']}x real time, "
+              f"{c['wall_s']} s (median; runs {c['all_wall_s']} s)")
     if "stepped_threaded" in out:
         s = out["stepped_threaded"]
         print(f"stepped threaded replay (ptys, Modbus servers, driver threads): "
