@@ -373,6 +373,7 @@ class BulkAssembler:
         self._views: dict[int, Any] = {}
         self._k0 = 0
         self._i = 0
+        self._last_span = False
         self.k = -1
         """Index of the last tick served."""
 
@@ -381,6 +382,7 @@ class BulkAssembler:
         if i >= len(self._samples):
             span = next(self._spans)
             self._samples, self._views, self._k0, i = span.samples, span.views, span.k0, 0
+            self._last_span = self.feed.finished  # the feed works lazily: it knows now
         self._i = i + 1
         k = self.k = self._k0 + i
         view = self._views.get(k)
@@ -397,4 +399,4 @@ class BulkAssembler:
     @property
     def finished(self) -> bool:
         """The last tick of the capture has been served."""
-        return self.feed.finished and self._i >= len(self._samples)
+        return self._last_span and self._i >= len(self._samples)
