@@ -236,6 +236,14 @@ class Publisher:
         self.sent += 1
         return True
 
+    def put_text(self, topic: str, make: Callable[[], str | None]) -> bool:
+        """:meth:`put` of the text ``make()`` returns, made only if it would go out: the
+        loop topics are written at their rate whether or not anyone listens, and most of
+        the time nobody does (counted as ``put`` counts)."""
+        if self._pubs.get(topic) is None or not self._matching.get(topic, True):
+            return self.put(topic, None)  # counts it, sends nothing
+        return self.put(topic, make())
+
     def matching(self, topic: str = "pass") -> bool:
         """Whether any subscriber currently matches ``topic``."""
         pub = self._pubs.get(topic)

@@ -315,12 +315,14 @@ class Service:
         self._tick_no += 1
         # joints first: they need only the sample, not the engine's step
         if k % self._joints_every == 0:
-            if self.publisher.put("joints", joints_json(self.clock.wall(t), s)) and pending:
+            if self.publisher.put_text(
+                    "joints", lambda: joints_json(self.clock.wall(t), s)) and pending:
                 self._published(True)
         for ev in engine.step(s):
             self._event(ev, t)
         if k % self._live_every == 0 and self._live is not None:
-            if self.publisher.put("payload/live", self.live_json()) and self._pending_arrivals:
+            if self.publisher.put_text("payload/live", self.live_json) and \
+                    self._pending_arrivals:
                 self._published(False)
         if t >= self._next_health:
             self._next_health = t + self.cfg.loop.health_period_s
