@@ -39,9 +39,19 @@ def _health(msg: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def _replay(capture: Path, tmp: Path, bulk: bool, until_s: float | None = None
+def _silence(transport: Any, start: float, end: float) -> None:
+    """Drop a serial device's recorded data in [start, end): the device falls silent."""
+    keep = [c for c in transport.stream if not start <= c[0] < end]
+    transport.stream[:] = keep
+    transport._times[:] = [c[0] for c in keep]
+    transport._chunks[:] = [c[1] for c in keep]
+
+
+def _replay(capture: Path, tmp: Path, bulk: bool, until_s: float | None = None,
+            span_ticks: int | None = None, laser_gap: tuple[float, float] | None = None
             ) -> dict[str, Any]:
-    """Samples, health messages, passes and trucks of a fast replay of ``capture``."""
+    """Samples, health messages, passes and trucks of a fast replay of ``capture``
+    (``span_ticks``: the bulk feed's span; ``laser_gap``: the laser silent then)."""
     exp = json.loads((capture / "expected.json").read_text())
     params = capture / "params.toml"
     cfg = parse_config({"shovel": {"id": "bulk", "params": str(params),
@@ -51,6 +61,11 @@ def _replay(capture: Path, tmp: Path, bulk: bool, until_s: float | None = None
                        "<test>", require_devices=False)
     rr = fast_replay_service(capture, cfg, load_params(params), bulk=bulk)
     svc = rr.service
+    sync = rr.session.sync if bulk else rr.session
+    if laser_gap is not None:
+        _silence(sync.transports["laser"], *laser_gap)
+    if span_ticks is not None:
+        svc.assembler.feed.span_ticks = span_ticks
     got: dict[str, Any] = {"samples": [], "health": [], "pass": [], "truck": []}
     sample = svc.assembler.sample
     svc.assembler.sample = lambda t: got["samples"].append(sample(t)) or got["samples"][-1]
@@ -88,3 +103,28 @@ def test_bulk_replay_stops_where_asked(tmp_path: Path) -> None:
     bulk = _replay(capture, tmp_path, bulk=True, until_s=12.345)
     assert bulk["figures"]["capture_s"] == stepped["figures"]["capture_s"] >= 12.345
     assert [_row(s) for s in bulk["samples"]] == [_row(s) for s in stepped["samples"]]
+
+
+def test_span_boundaries_change_nothing(tmp_path: Path) -> None:
+    """Short spans: the newest reading, the unwrapped swing, the invalid lists and the
+    reading counts carry over from span to span."""
+    capture = captures()[0]
+    stepped = _replay(capture, tmp_path, bulk=False, until_s=40.0)
+    bulk = _replay(capture, tmp_path, bulk=True, until_s=40.0, span_ticks=333)
+    assert [_row(s) for s in bulk["samples"]] == [_row(s) for s in stepped["samples"]]
+    assert bulk["health"] == stepped["health"]
+
+
+def test_a_silent_laser_is_stale_then_disconnected_alike(tmp_path: Path) -> None:
+    """The laser stops for 6 s: stale, then its driver's silence timeout disconnects it
+    and the reconnects back off in capture time; samples and health agree tick by tick."""
+    capture = next(p for p in captures() if p.name == "daemon-e2e")
+    gap = (20.0, 26.0)
+    stepped = _replay(capture, tmp_path, bulk=False, until_s=35.0, laser_gap=gap)
+    bulk = _replay(capture, tmp_path, bulk=True, until_s=35.0, laser_gap=gap,
+                   span_ticks=1000)
+    states = {h["drivers"]["laser"]["state"] for h in stepped["health"]}
+    assert {"stale", "disconnected"} <= states  # the gap is seen as both
+    assert stepped["health"][-1]["drivers"]["laser"]["reconnects"] >= 1
+    assert [_row(s) for s in bulk["samples"]] == [_row(s) for s in stepped["samples"]]
+    assert bulk["health"] == stepped["health"]
