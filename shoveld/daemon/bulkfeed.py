@@ -349,6 +349,10 @@ class BulkSession:
     def finished(self) -> bool:
         return self.assembler.finished
 
+    @property
+    def error(self) -> BaseException | None:
+        return self.assembler.error
+
     def close(self) -> None:
         self.sync.close()
 
@@ -374,13 +378,19 @@ class BulkAssembler:
         self._k0 = 0
         self._i = 0
         self._last_span = False
+        self.error: BaseException | None = None
+        """What stopped the feed before the capture's end (the replay raises it)."""
         self.k = -1
         """Index of the last tick served."""
 
     def sample(self, t: float) -> Sample:
         i = self._i
         if i >= len(self._samples):
-            span = next(self._spans)
+            try:
+                span = next(self._spans)
+            except BaseException as e:  # the replay must end here, not fail every tick
+                self.error, self._last_span, self._samples = e, True, []
+                raise
             self._samples, self._views, self._k0, i = span.samples, span.views, span.k0, 0
             self._last_span = self.feed.finished  # the feed works lazily: it knows now
         self._i = i + 1

@@ -64,6 +64,9 @@ class ReplayRun:
             return bool(self.session.finished or (until_s is not None
                                                   and clock.now() >= until_s))
         svc.run(stop, done=done)
+        error = getattr(self.session, "error", None)
+        if error is not None:  # the bulk feed failed: the ticks after it had no samples
+            raise error
         real = time.monotonic() - t_real
         played = svc.clock.now() - t0
         return {"capture_s": round(played, 3), "real_s": round(real, 3),
