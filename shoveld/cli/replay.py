@@ -29,9 +29,10 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Feeds a capture folder through the drivers into the daemon. --speed X "
                     "plays it on the drivers' virtual hardware (ptys, virtual CAN, a local "
                     "Modbus server) with one thread per driver, X times the recorded pace, "
-                    "exactly like live. --fast steps the same drivers on in-memory transports "
-                    "from the loop: deterministic (same passes every run) and as fast as the "
-                    "machine allows. Passes and trucks are printed as they are committed.")
+                    "exactly like live. --fast runs the same drivers on in-memory transports, each "
+                    "device ahead of the loop, and builds the samples in bulk: deterministic "
+                    "(same passes every run) and as fast as the machine allows. Passes and "
+                    "trucks are printed as they are committed.")
     p.add_argument("capture", metavar="CAPTURE", help="capture folder (manifest.json)")
     mode = p.add_mutually_exclusive_group()
     mode.add_argument("--speed", type=_pace, default=None,

@@ -6,6 +6,8 @@ recorded driver configuration at its replay endpoint, and builds a normal
 :class:`Service` on a replay clock: stepped (as fast as the machine allows,
 deterministic) or paced at ``speed`` times the recorded pace. Everything after the
 drivers - store, assembly, engine, pass log, Zenoh - is the live code.
+:func:`fast_replay_service` runs the drivers on in-memory transports instead, fed to
+the same service in bulk (or tick by tick).
 """
 
 from __future__ import annotations

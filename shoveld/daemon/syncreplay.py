@@ -13,6 +13,11 @@ drivers' replay helpers (:class:`~drivers.capture.replay.RecordedAnswers`,
 releases the recorded data up to the tick time and lets each driver read it, in
 the loop's thread. No threads, no sockets, nothing timed by the host: the same
 capture gives the same readings, samples and passes on every run.
+
+This is the per-tick feeder, in the live daemon's order of work. ``shoveld replay
+--fast`` steps the same :class:`SyncDevice` objects one device at a time ahead of the
+loop and builds the samples in bulk (:mod:`shoveld.daemon.bulkfeed`); both give the
+same samples.
 """
 
 from __future__ import annotations
