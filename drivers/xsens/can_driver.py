@@ -180,8 +180,13 @@ class MtiCanDriver(Driver):
                  messages: tuple[str, ...] = DEFAULT_MESSAGES, data_timeout_s: float = 1.0,
                  recv_timeout_s: float = 0.05, clock: Callable[[], float] = time.monotonic,
                  backoff_s: tuple[float, float] = (0.2, 5.0),
-                 bus_factory: Callable[..., can.BusABC] = can.Bus) -> None:
+                 bus_factory: Callable[..., can.BusABC] = can.Bus,
+                 timeout_clock: Callable[[], float] = time.monotonic) -> None:
         super().__init__(name, clock=clock, backoff_s=backoff_s)
+        self.timeout_clock = timeout_clock
+        """The clock ``data_timeout_s`` runs on once open: host time live; a replay stepped
+        by its loop passes its capture clock, so a recorded silence is judged in capture
+        time and the host's speed cannot change the outcome."""
         bad = [m for m in messages if m not in _QUANTITIES]
         if bad or not messages:
             raise ValueError(f"mti_can config: 'messages' must be a non-empty list of "
@@ -276,7 +281,7 @@ class MtiCanDriver(Driver):
             if msg is not None and self.codec.decode(msg.arbitration_id, bytes(msg.data)):
                 self._first = msg
                 break
-        self._last_valid = time.monotonic()
+        self._last_valid = self.timeout_clock()
 
     def read(self, sink: Sink) -> None:
         if self._bus is None:
@@ -296,7 +301,7 @@ class MtiCanDriver(Driver):
             self._on_frame(msg, sink)
             if left <= 0:
                 break
-        now = time.monotonic()
+        now = self.timeout_clock()
         if now - self._last_valid > self.data_timeout_s:
             self.health.timeouts += 1
             raise DeviceError(f"no MTi frames on CAN {self.interface}:{self.channel} for "
@@ -311,7 +316,7 @@ class MtiCanDriver(Driver):
                 self.health.bad_frames += 1
             return
         kind, vals = decoded
-        self._last_valid = time.monotonic()
+        self._last_valid = self.timeout_clock()
         if kind == "error":
             self.health.extra["device_errors"] += 1
             self.health.last_error = f"MTi CAN error 0x{int(vals[0]):02X}"

@@ -106,8 +106,13 @@ class MtiSerialDriver(Driver):
                  command_timeout_s: float = 1.0, data_timeout_s: float = 1.0,
                  read_timeout_s: float = 0.05, clock: Callable[[], float] = time.monotonic,
                  backoff_s: tuple[float, float] = (0.2, 5.0),
-                 serial_factory: Callable[..., serial.Serial] = serial.Serial) -> None:
+                 serial_factory: Callable[..., serial.Serial] = serial.Serial,
+                 timeout_clock: Callable[[], float] = time.monotonic) -> None:
         super().__init__(name, clock=clock, backoff_s=backoff_s)
+        self.timeout_clock = timeout_clock
+        """The clock ``data_timeout_s`` runs on: host time live; a replay stepped by its
+        loop passes its capture clock, so a recorded silence is judged in capture time and
+        the host's speed cannot change the outcome."""
         _check("port", port, isinstance(port, str) and bool(port), "a device path")
         _check("baudrate", baudrate, baudrate in BAUD_RATES, f"one of {BAUD_RATES}")
         _check("rate_hz", rate_hz, isinstance(rate_hz, int) and 1 <= rate_hz <= 2000,
@@ -305,13 +310,13 @@ class MtiSerialDriver(Driver):
         self._command(MID.GOTO_MEASUREMENT, b"", MID.GOTO_MEASUREMENT_ACK)
         self._prev_counter = None
         self._prev_frame = None
-        self._last_valid = time.monotonic()
+        self._last_valid = self.timeout_clock()
         log.info("%s: MTi on %s measuring at %s Hz", self.name, self.port,
                  self.health.extra["output_rate_hz"])
 
     def read(self, sink: Sink) -> None:
         msgs = self._receive()
-        now = time.monotonic()
+        now = self.timeout_clock()
         for msg in msgs:
             if msg.mid == MID.MTDATA2:
                 self._last_valid = now

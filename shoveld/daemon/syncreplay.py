@@ -317,11 +317,13 @@ class SyncReplay:
                 tr = MemorySerial(stream, RecordedAnswers(pairs), f"capture:{name}")
                 transport = tr
                 drv = build_driver(dev, self.clock,
-                                   serial_factory=lambda *a, _t=transport, **k: _t)
+                                   serial_factory=lambda *a, _t=transport, **k: _t,
+                                   **self._timeouts(entry.kind))
             elif entry.kind in CAN_KINDS:
                 tr = MemoryBus(list(self.capture.can_messages(name)))
                 transport = tr
-                drv = build_driver(dev, self.clock, bus_factory=lambda _t=transport, **k: _t)
+                drv = build_driver(dev, self.clock, bus_factory=lambda _t=transport, **k: _t,
+                                   **self._timeouts(entry.kind))
             elif entry.kind in MODBUS_KINDS:
                 reads = list(self.capture.modbus_reads(name))
                 regs = RecordedRegisters(reads, self.clock)
@@ -333,6 +335,13 @@ class SyncReplay:
             self.transports[name] = tr
         self.end_t = max((tr.end_t for tr in self.transports.values()), default=0.0)
         self._devs: list[SyncDevice] = []
+
+    def _timeouts(self, kind: str) -> dict[str, Any]:
+        """Driver arguments that put its data timeout on capture time (the MTi's runs on
+        host time live; here host time says only how fast the machine replays)."""
+        from shoveld.daemon.config import MTI_KINDS
+
+        return {"timeout_clock": self.clock} if kind in MTI_KINDS else {}
 
     def attach(self, sinks: dict[str, Callable[[Reading], None]]) -> None:
         self._devs = [SyncDevice(n, self.drivers[n], self.transports[n], sinks[n], self.clock)

@@ -48,10 +48,10 @@ def _silence(transport: Any, start: float, end: float) -> None:
 
 
 def _replay(capture: Path, tmp: Path, bulk: bool, until_s: float | None = None,
-            span_ticks: int | None = None, laser_gap: tuple[float, float] | None = None
-            ) -> dict[str, Any]:
+            span_ticks: int | None = None,
+            gaps: dict[str, tuple[float, float]] | None = None) -> dict[str, Any]:
     """Samples, health messages, passes and trucks of a fast replay of ``capture``
-    (``span_ticks``: the bulk feed's span; ``laser_gap``: the laser silent then)."""
+    (``span_ticks``: the bulk feed's span; ``gaps``: serial devices silent then)."""
     exp = json.loads((capture / "expected.json").read_text())
     params = capture / "params.toml"
     cfg = parse_config({"shovel": {"id": "bulk", "params": str(params),
@@ -62,8 +62,8 @@ def _replay(capture: Path, tmp: Path, bulk: bool, until_s: float | None = None,
     rr = fast_replay_service(capture, cfg, load_params(params), bulk=bulk)
     svc = rr.service
     sync = rr.session.sync if bulk else rr.session
-    if laser_gap is not None:
-        _silence(sync.transports["laser"], *laser_gap)
+    for device, gap in (gaps or {}).items():
+        _silence(sync.transports[device], *gap)
     if span_ticks is not None:
         svc.assembler.feed.span_ticks = span_ticks
     got: dict[str, Any] = {"samples": [], "health": [], "pass": [], "truck": []}
@@ -120,11 +120,27 @@ def test_a_silent_laser_is_stale_then_disconnected_alike(tmp_path: Path) -> None
     and the reconnects back off in capture time; samples and health agree tick by tick."""
     capture = next(p for p in captures() if p.name == "daemon-e2e")
     gap = (20.0, 26.0)
-    stepped = _replay(capture, tmp_path, bulk=False, until_s=35.0, laser_gap=gap)
-    bulk = _replay(capture, tmp_path, bulk=True, until_s=35.0, laser_gap=gap,
+    stepped = _replay(capture, tmp_path, bulk=False, until_s=35.0, gaps={"laser": gap})
+    bulk = _replay(capture, tmp_path, bulk=True, until_s=35.0, gaps={"laser": gap},
                    span_ticks=1000)
     states = {h["drivers"]["laser"]["state"] for h in stepped["health"]}
     assert {"stale", "disconnected"} <= states  # the gap is seen as both
     assert stepped["health"][-1]["drivers"]["laser"]["reconnects"] >= 1
+    assert [_row(s) for s in bulk["samples"]] == [_row(s) for s in stepped["samples"]]
+    assert bulk["health"] == stepped["health"]
+
+
+def test_a_silent_mti_times_out_in_capture_time_alike(tmp_path: Path) -> None:
+    """The MTi stops for 3 s: its driver's 1 s data timeout runs on capture time in fast
+    replay (host time would depend on how fast the machine replays, and on how far
+    apart the bulk feed steps the driver), so both feeders reconnect it at the same
+    tick, through the handshake answered from the recording."""
+    capture = next(p for p in captures() if p.name == "daemon-e2e")
+    gap = (30.0, 33.0)
+    stepped = _replay(capture, tmp_path, bulk=False, until_s=40.0, gaps={"mti": gap})
+    bulk = _replay(capture, tmp_path, bulk=True, until_s=40.0, gaps={"mti": gap},
+                   span_ticks=777)
+    mti = stepped["health"][-1]["drivers"]["mti"]
+    assert mti["timeouts"] >= 1 and mti["reconnects"] >= 1 and mti["connected"]
     assert [_row(s) for s in bulk["samples"]] == [_row(s) for s in stepped["samples"]]
     assert bulk["health"] == stepped["health"]
