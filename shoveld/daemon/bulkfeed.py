@@ -4,9 +4,10 @@ The stepped fast replay (:mod:`shoveld.daemon.syncreplay`) runs the four drivers
 store and the assembler inside every 10 ms tick. Nothing a driver does there depends
 on another device or on the engine, so here each device's driver runs alone over a
 span of ticks (:class:`~shoveld.daemon.syncreplay.SyncDevice`, the same stepping,
-handshakes, parsers and health rules), and its readings are kept as columns. The
-samples of the whole span are then built at once with numpy by the assembler's rules
-(:func:`assemble_span`), and the loop only hands each one to the engine.
+handshakes, parsers and health rules), and its readings are kept with their ticks.
+The samples of the whole span are then built at once with numpy by the assembler's
+rules (:meth:`BulkFeed._assemble`), and the loop only hands each one to the engine
+(:class:`BulkAssembler` stands in for the service's assembler).
 
 Work goes in spans of ``span_ticks`` so that memory does not grow with the capture.
 ``tests/daemon/test_bulkfeed.py`` checks sample for sample and pass for pass that this
@@ -33,6 +34,8 @@ from shoveld.sample import SIGNAL_FIELDS, Sample
 from shoveld.signals.columns import BY_NAME
 
 _COL = {name: i for i, name in enumerate(SIGNAL_FIELDS)}
+_BIT = {name: 1 << i for i, name in enumerate(SIGNAL_FIELDS)}
+"""A bit per signal, for a tick's invalid set as one integer."""
 _EMPTY: frozenset[str] = frozenset()
 OK, INVALID, STALE, DISCONNECTED, NO_DATA = range(5)
 STATES = ("ok", "invalid", "stale", "disconnected", "no_data")
@@ -222,59 +225,65 @@ class BulkFeed:
 
     # -- assembly ----------------------------------------------------------------------------
     def _assemble(self, k0: int, k1: int, look: set[int]) -> Span:
-        n = k1 - k0
+        """The samples of ticks ``[k0, k1)``, and what the service may show of health."""
         ks = np.arange(k0, k1)
         t = 0.0 + ks * self.period
-        rows = np.full((n, len(SIGNAL_FIELDS)), np.nan)
+        rows = np.full((len(ks), len(SIGNAL_FIELDS)), np.nan)
         rows[:, 0] = t
-        bad = np.zeros(n, dtype=np.int64)  # a bit per signal of the tick's invalid set
-        bit = {sg: 1 << i for i, sg in enumerate(SIGNAL_FIELDS)}
+        bad = np.zeros(len(ks), dtype=np.int64)  # a bit per signal of the tick's invalid set
         views: dict[int, dict[str, tuple[DriverHealth, DeviceState, int]]] = {}
         for name, dev in self.devices.items():
-            tr = self.tracks[name]
-            conn = np.asarray(tr.connected[:n], dtype=bool)
-            rk = np.asarray(tr.tick, dtype=np.int64)
-            idx = np.searchsorted(rk, ks, side="right") - 1  # the newest reading by each tick
-            have = idx >= 0
-            j = np.where(have, idx, 0)
-            th = np.asarray(tr.t_host, dtype=float)
-            if np.any(th > 0.0 + rk * self.period):  # the stepped clock cannot do this
-                raise RuntimeError(f"{name}: a reading stamped after its tick; the bulk "
-                                   "replay assumes readings stamped by the stepped clock")
-            age = t - th[j] if len(th) else np.full(n, np.nan)
-            state = np.full(n, OK, dtype=np.int8)
-            state[~have] = NO_DATA
-            stale = have & (age > dev.max_age_s)
-            state[stale] = STALE
-            state[~conn] = DISCONNECTED
-            live = have & conn & ~stale
-            dev_bits = 0
-            for sg in dev.signals:
-                dev_bits |= bit[sg]
-            bad[~live] |= dev_bits
-            cols = [np.asarray(c, dtype=float)[j] if len(c) else np.full(n, np.nan)
-                    for c in tr.cols]
-            sig_bad = self._contribute(dev, cols, live, rows, bad, bit)
-            state[live & (sig_bad != 0)] = INVALID
-            # the assembler leaves a device's invalid list as it was while it is stale or
-            # disconnected: the list of its last tick with a usable reading
-            last_live = np.maximum.accumulate(np.where(live, np.arange(n), -1))
-            for k in sorted(tr.health):
-                if not k0 <= k < k1:
-                    continue
-                i = k - k0
-                li = int(last_live[i])
-                inv = (tr.last_invalid if li < 0 else
-                       sorted(sg for sg in dev.signals if int(sig_bad[li]) & bit[sg]))
-                st = DeviceState(STATES[state[i]], float(age[i]) if have[i] else None, inv)
-                views.setdefault(k, {})[name] = (tr.health[k], st, tr.dropped + int(idx[i]) + 1)
-            if n and last_live[-1] >= 0:
-                li = int(last_live[-1])
-                tr.last_invalid = sorted(sg for sg in dev.signals if int(sig_bad[li]) & bit[sg])
+            self._device(name, dev, ks, t, rows, bad, views)
         return Span(k0, self._samples(rows, bad), views)
 
+    def _device(self, name: str, dev: DeviceConfig, ks: np.ndarray, t: np.ndarray,
+                rows: np.ndarray, bad: np.ndarray,
+                views: dict[int, dict[str, tuple[DriverHealth, DeviceState, int]]]) -> None:
+        """One device's part of a span: its signals into ``rows`` where it is usable, its
+        signals' bits into ``bad`` where not, and its state where health is looked at."""
+        tr = self.tracks[name]
+        n, k0 = len(ks), int(ks[0])
+        conn = np.asarray(tr.connected[:n], dtype=bool)
+        rk = np.asarray(tr.tick, dtype=np.int64)
+        idx = np.searchsorted(rk, ks, side="right") - 1  # the newest reading by each tick
+        have = idx >= 0
+        j = np.where(have, idx, 0)
+        th = np.asarray(tr.t_host, dtype=float)
+        if np.any(th > 0.0 + rk * self.period):  # the stepped clock cannot do this
+            raise RuntimeError(f"{name}: a reading stamped after its tick; the bulk "
+                               "replay assumes readings stamped by the stepped clock")
+        age = t - th[j] if len(th) else np.full(n, np.nan)
+        state = np.full(n, OK, dtype=np.int8)
+        state[~have] = NO_DATA
+        stale = have & (age > dev.max_age_s)
+        state[stale] = STALE
+        state[~conn] = DISCONNECTED
+        live = have & conn & ~stale
+        bad[~live] |= sum(_BIT[sg] for sg in dev.signals)
+        cols = [np.asarray(c, dtype=float)[j] if len(c) else np.full(n, np.nan)
+                for c in tr.cols]
+        sig_bad = self._contribute(dev, cols, live, rows)
+        bad |= sig_bad
+        state[live & (sig_bad != 0)] = INVALID
+
+        def invalid_at(i: int) -> list[str]:
+            return sorted(sg for sg in dev.signals if int(sig_bad[i]) & _BIT[sg])
+        # the assembler leaves a device's invalid list as it was while it is stale or
+        # disconnected: the list of its last tick with a usable reading
+        last_live = np.maximum.accumulate(np.where(live, np.arange(n), -1))
+        for k in sorted(tr.health):
+            i = k - k0
+            if not 0 <= i < n:
+                continue
+            li = int(last_live[i])
+            st = DeviceState(STATES[state[i]], float(age[i]) if have[i] else None,
+                             tr.last_invalid if li < 0 else invalid_at(li))
+            views.setdefault(k, {})[name] = (tr.health[k], st, tr.dropped + int(idx[i]) + 1)
+        if n and last_live[-1] >= 0:
+            tr.last_invalid = invalid_at(int(last_live[-1]))
+
     def _contribute(self, dev: DeviceConfig, cols: list[np.ndarray], live: np.ndarray,
-                    rows: np.ndarray, bad: np.ndarray, bit: dict[str, int]) -> np.ndarray:
+                    rows: np.ndarray) -> np.ndarray:
         """Put one device's signals into ``rows`` at its live ticks (the assembler's
         rules, on columns); the bits of its signals that were invalid there."""
         inst = self.inst
@@ -286,17 +295,16 @@ class BulkFeed:
             ok = (lo <= handle) & (handle <= hi)
             use = live & ok
             rows[use, _COL["handle_deg"]] = handle[use]
-            sig_bad[live & ~ok] |= bit["handle_deg"]
+            sig_bad[live & ~ok] |= _BIT["handle_deg"]
             yaw_bad = np.isnan(yaw)
-            sig_bad[live & yaw_bad] |= bit["swing_deg"]
+            sig_bad[live & yaw_bad] |= _BIT["swing_deg"]
             # the unwrapped swing carries state from tick to tick, as in the assembler
-            sw_col = _COL["swing_deg"]
-            prev = self._swing_prev
-            swing = inst.swing_deg
-            out = rows[:, sw_col]
-            for i in np.flatnonzero(live & ~yaw_bad).tolist():
-                prev = unwrap_deg(prev, swing(float(yaw[i])))
-                out[i] = prev
+            at = np.flatnonzero(live & ~yaw_bad)
+            prev, swing, out = self._swing_prev, inst.swing_deg, []
+            for y in yaw[at].tolist():
+                prev = unwrap_deg(prev, swing(y))
+                out.append(prev)
+            rows[at, _COL["swing_deg"]] = out
             self._swing_prev = prev
         elif dev.kind in LASER_KINDS:
             (v,) = cols
@@ -304,14 +312,13 @@ class BulkFeed:
             lo, hi = BY_NAME["crowd_m"].lo, BY_NAME["crowd_m"].hi
             ok = (lo <= crowd) & (crowd <= hi)
             rows[live & ok, _COL["crowd_m"]] = crowd[live & ok]
-            sig_bad[live & ~ok] |= bit["crowd_m"]
+            sig_bad[live & ~ok] |= _BIT["crowd_m"]
         else:
             for sg, v in zip(dev.signals, cols, strict=True):
                 lo, hi = BY_NAME[sg].lo, BY_NAME[sg].hi
                 ok = (lo <= v) & (v <= hi)
                 rows[live & ok, _COL[sg]] = v[live & ok]
-                sig_bad[live & ~ok] |= bit[sg]
-        bad |= sig_bad
+                sig_bad[live & ~ok] |= _BIT[sg]
         return sig_bad
 
     @staticmethod
