@@ -75,8 +75,8 @@ PAYLOAD_ROWS = (("identified parameters", "all realism", False),
                  True))
 
 ABLATIONS = ("all realism", "noise-free angles", "noise-free handle angle",
-             "noise-free crowd extension", "noise-free currents", "no drift or split wander",
-             "no offsets or gain errors")
+             "noise-free crowd extension", "noise-free currents", "noise-free field channel",
+             "no drift or split wander", "no offsets or gain errors")
 
 
 def payload_job(job: dict[str, Any]) -> dict[str, Any]:
@@ -105,7 +105,7 @@ def ablation_job(job: tuple[str, int]) -> tuple[str, dict[str, tuple[float, floa
     machine = variant(Machine.draw(seed), name)
     p = pa.calibrate(machine, seed, "output")
     truth = pa.truth_of(machine, p)
-    return name, {n: (float(v) - truth[n], float(se), truth[n])
+    return name, {pa.knot_group(n): (float(v) - truth[n], float(se), truth[n])
                   for n, v, se in zip(p.names, p.values, p.stderr, strict=True)}
 
 
@@ -134,14 +134,14 @@ def main() -> None:
     if abl:
         print(f"\nidentified parameters over {args.ablate} machines per row: bias (mean error "
               "/ mean std err), within 2 std err")
-        names = [n for n in abl[0][1] if all(n in d for _, d in abl)]
+        names = list(dict.fromkeys(n for _, d in abl for n in d))
         print("  " + " " * 27 + "".join(f"{n:>12s}" for n in names))
         for row in ABLATIONS:
             rs = [d for name, d in abl if name == row]
             cells = []
-            for n in names:
-                e = np.array([d[n][0] for d in rs])
-                se = np.array([d[n][1] for d in rs])
+            for n in names:  # (a field knot: the machines that have it)
+                e = np.array([d[n][0] for d in rs if n in d])
+                se = np.array([d[n][1] for d in rs if n in d])
                 cells.append(f"{e.mean() / se.mean():+5.2f} {np.mean(np.abs(e) <= 2 * se):4.0%}")
             print(f"  {row:27s}" + "".join(f"{c:>12s}" for c in cells))
     print(f"\n({time.perf_counter() - t0:.0f} s wall, {args.jobs} workers)")

@@ -269,15 +269,17 @@ class Calibrator:
     def _choose_field_knots(self, tables: list[SignalsTable]) -> None:
         """Give the hoist drive its field-current knots from the data, unless given."""
         hoist = next((t for t in self.model.terms if t.name == "hoist_drive"), None)
+        ends = {"above_top_knot": "slope", "below_bottom_knot": "slope",
+                "spline_ends": "not-a-knot"}
         if hoist is None or ("field_knots_a" in hoist.hyper
-                             and "above_top_knot" in hoist.hyper):
+                             and ends.keys() <= hoist.hyper.keys()):
             return
         if "field_knots_a" in hoist.hyper:
-            hyper = {**hoist.hyper, "above_top_knot": "slope"}
+            hyper = {**ends, **hoist.hyper}
         else:
             nominal, knots = choose_field_knots(tables)
             hyper = {**hoist.hyper, "field_nominal_a": nominal, "field_knots_a": knots,
-                     "above_top_knot": "slope"}
+                     **ends}
         self.model = Model([type(hoist)(**hyper) if t is hoist else t for t in self.model.terms])
 
     def _rows(self, files: list[FileData]) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
@@ -338,7 +340,9 @@ class Calibrator:
             of = fit_output(self.model, [f.kin.take(f.use) for f in files],
                             [f.payload[f.use] for f in files],
                             [np.asarray(o) for o in oks], p,
-                            angle_drift_deg=self.angle_drift_deg)
+                            angle_drift_deg=self.angle_drift_deg,
+                            field_noise=float(np.median([output_error.field_noise_a(
+                                f.kin.i_hf) for f in files])))
             self.output_fit_ = of
             p, cov = of.p, of.cov
             sigma = np.array([of.force_rms["handle"], of.force_rms["crowd"]])

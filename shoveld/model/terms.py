@@ -129,21 +129,31 @@ class RigidArm(Term):
         return _stack((md_th, md_d), (mlc_th, mlc_d))
 
 
-def field_basis(i_f: np.ndarray, knots: tuple[float, ...], slope_above: bool = True
-                ) -> np.ndarray:
+def field_basis(i_f: np.ndarray, knots: tuple[float, ...], slope_above: bool = True,
+                slope_below: bool = True, ends: str = "not-a-knot") -> np.ndarray:
     """(N, K) weights of the hoist field current on the knots of a smooth curve.
 
-    Between knots: a natural cubic spline through the knot values (linear in them; a
+    Between knots: a cubic spline through the knot values (linear in them; a
     magnetisation curve is smooth, and straight segments 10 A long left 0.2-0.3 % of
-    K_H unexplained between knots). Above the highest knot: along the curve's slope
-    there for half a knot step, then constant (the iron is saturated). The highest knot
+    K_H unexplained between knots). Its ends are not-a-knot: a natural spline (no
+    curvature at the end knots) on a Froehlich curve with knots 10 A apart is 0.24 %
+    under it between the two lowest knots and 0.04 % near the top one, and the fit
+    moved the knot values to make up for it; not-a-knot is within 0.02 %
+    (docs/engine.md). ``ends="natural"`` is the curve of params files identified with
+    it. Above the highest knot: along the curve's slope there for half a knot step,
+    then constant (the iron is saturated). The highest knot
     is the nominal field rounded to an amp, and the field's noise spreads readings
     around it: a curve flat from the knot up left the readings above it at the knot's
     value and those below it lower, which biased K_H by +0.55 standard errors over 150
     simulated machines (−0.16 with the slope; docs/engine.md). ``slope_above=False``
-    is that flat curve, for params files identified with it. Below the lowest:
-    proportional to the field (unsaturated iron, flux ~ field current), the physical
-    way out of the calibrated range.
+    is that flat curve, for params files identified with it. Below the lowest knot, the
+    same: along the curve's slope for half a knot step, then proportional to the field
+    (unsaturated iron, flux ~ field current), the physical way out of the calibrated
+    range. The lowest knot is the drive's minimum field, and noise puts half its
+    readings below it; proportional from the knot down, those readings fell 0.7-1.5 %
+    under the magnetisation curve and the lowest knot's value came out +1.4 standard
+    errors high (docs/engine.md). ``slope_below=False`` is that curve, for params files
+    identified with it.
     """
     kn = np.asarray(knots, dtype=float)
     x = np.nan_to_num(np.asarray(i_f, dtype=float), nan=kn[-1])
@@ -151,62 +161,83 @@ def field_basis(i_f: np.ndarray, knots: tuple[float, ...], slope_above: bool = T
         out = np.ones((len(x), 1))
         out[:, 0] = np.where(x < kn[0], np.maximum(x, 0.0) / kn[0], 1.0)
         return out
-    spline = _spline_basis(tuple(kn))
+    spline = _spline_basis(tuple(kn), ends)
     out = spline(np.clip(x, kn[0], kn[-1]))
     above = x > kn[-1]
     if slope_above and above.any():
-        top, slope = _end_slope(tuple(kn))
+        top, slope = _end_slope(tuple(kn), ends)
         step = np.minimum(x[above], kn[-1] + 0.5 * (kn[-1] - kn[-2])) - kn[-1]
         out[above] = top[None, :] + step[:, None] * slope[None, :]
     below = x < kn[0]
-    if below.any():
+    if below.any() and slope_below:
+        bottom, slope = _start_slope(tuple(kn), ends)
+        x_b = kn[0] - 0.5 * (kn[1] - kn[0])
+        step = np.maximum(x[below], x_b) - kn[0]
+        # along the slope down to x_b, then proportional from the curve's value there
+        at = bottom[None, :] + step[:, None] * slope[None, :]
+        out[below] = at * np.where(x[below] < x_b, np.maximum(x[below], 0.0) / x_b, 1.0)[:, None]
+    elif below.any():
         out[below, :] = 0.0
         out[below, 0] = np.maximum(x[below], 0.0) / kn[0]
     return out
 
 
 @functools.cache
-def _end_slope(kn: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
+def _end_slope(kn: tuple[float, ...], ends: str) -> tuple[np.ndarray, np.ndarray]:
     """Weights of the curve's value and slope at the highest knot (the basis is a cubic
     on the last segment, so a one-sided difference over a millionth of it is exact to
     about that much)."""
     d = 1e-6 * (kn[-1] - kn[-2])
-    rows = _spline_basis(kn)(np.array([kn[-1], kn[-1] - d]))
+    rows = _spline_basis(kn, ends)(np.array([kn[-1], kn[-1] - d]))
     return rows[0], (rows[0] - rows[1]) / d
 
 
 @functools.cache
-def _spline_basis(knots: tuple[float, ...]) -> Any:
-    """The natural cubic spline through each unit vector of knot values."""
-    return _NaturalSpline(knots) if len(knots) > 2 else _Linear(knots)
+def _start_slope(kn: tuple[float, ...], ends: str) -> tuple[np.ndarray, np.ndarray]:
+    """Weights of the curve's value and slope at the lowest knot (as :func:`_end_slope`)."""
+    d = 1e-6 * (kn[1] - kn[0])
+    rows = _spline_basis(kn, ends)(np.array([kn[0], kn[0] + d]))
+    return rows[0], (rows[1] - rows[0]) / d
 
 
-class _NaturalSpline:
-    """The natural cubic spline basis on numpy: row k of ``self(x)`` holds the weights of
-    the knot values at x[k]. scipy's ``CubicSpline(bc_type="natural")`` gives the same
-    (``tests/engine/test_filters.py``); importing scipy.interpolate in the live daemon
-    cost its loop 0.9 s at the first pass (py-spy, ``bench/daemon_live.py --profile``)."""
+@functools.cache
+def _spline_basis(knots: tuple[float, ...], ends: str) -> Any:
+    """The cubic spline through each unit vector of knot values."""
+    return _CubicSpline(knots, ends) if len(knots) > 2 else _Linear(knots)
 
-    def __init__(self, knots: tuple[float, ...]) -> None:
+
+class _CubicSpline:
+    """The cubic spline basis on numpy: row k of ``self(x)`` holds the weights of the
+    knot values at x[k]. Natural ends (no curvature at the end knots) or not-a-knot
+    (one cubic over the two end segments). scipy's ``CubicSpline`` with the same
+    ``bc_type`` gives the same (``tests/engine/test_filters.py``); importing
+    scipy.interpolate in the live daemon cost its loop 0.9 s at the first pass (py-spy,
+    ``bench/daemon_live.py --profile``)."""
+
+    def __init__(self, knots: tuple[float, ...], ends: str = "natural") -> None:
         x = np.asarray(knots, dtype=float)
         n = len(x)
         h = np.diff(x)
-        # Second derivatives m = M y, natural ends (m_0 = m_{n-1} = 0): the tridiagonal
-        # system h_{i-1} m_{i-1} + 2 (h_{i-1} + h_i) m_i + h_i m_{i+1} = 6 (slope diff).
-        a = np.zeros((n - 2, n - 2))
-        rhs = np.zeros((n - 2, n))
+        # Second derivatives m = M y: the interior rows
+        # h_{i-1} m_{i-1} + 2 (h_{i-1} + h_i) m_i + h_i m_{i+1} = 6 (slope diff),
+        # and a row per end: m = 0 there (natural), or the third derivative continuous
+        # across the first and last interior knots (not-a-knot).
+        a = np.zeros((n, n))
+        rhs = np.zeros((n, n))
         for i in range(1, n - 1):
-            r = i - 1
-            a[r, r] = 2.0 * (h[i - 1] + h[i])
-            if r > 0:
-                a[r, r - 1] = h[i - 1]
-            if r < n - 3:
-                a[r, r + 1] = h[i]
-            rhs[r, i - 1] += 6.0 / h[i - 1]
-            rhs[r, i] -= 6.0 / h[i - 1] + 6.0 / h[i]
-            rhs[r, i + 1] += 6.0 / h[i]
-        self.m = np.zeros((n, n))
-        self.m[1:-1] = np.linalg.solve(a, rhs)
+            a[i, i - 1], a[i, i], a[i, i + 1] = h[i - 1], 2.0 * (h[i - 1] + h[i]), h[i]
+            rhs[i, i - 1] += 6.0 / h[i - 1]
+            rhs[i, i] -= 6.0 / h[i - 1] + 6.0 / h[i]
+            rhs[i, i + 1] += 6.0 / h[i]
+        if ends == "not-a-knot" and n > 3:
+            a[0, :3] = h[1], -(h[0] + h[1]), h[0]
+            a[-1, -3:] = h[-1], -(h[-2] + h[-1]), h[-2]
+        elif ends == "not-a-knot":  # three knots: one parabola (as scipy's)
+            a[0, :2] = 1.0, -1.0
+            a[-1, -2:] = -1.0, 1.0
+        else:
+            a[0, 0] = a[-1, -1] = 1.0
+        self.m = np.linalg.solve(a, rhs)
         self.x, self.h = x, h
 
     def __call__(self, xs: np.ndarray) -> np.ndarray:
@@ -240,9 +271,10 @@ class HoistDrive(Term):
 
     A DC motor's pull per ampere is proportional to its flux, and the flux follows the
     field current along the motor's magnetisation curve; the drive weakens the field
-    above base speed (hoisting fast, lowering). K_H(i_f) is a piecewise-linear curve
-    through knots of the field current (hyper-parameter ``field_knots_a``, chosen by
-    the calibration where its data have field currents); its value at the nominal
+    above base speed (hoisting fast, lowering). K_H(i_f) is a cubic spline
+    (:func:`field_basis`) through knots of the field current (hyper-parameter
+    ``field_knots_a``, chosen by the calibration where its data have field currents);
+    its value at the nominal
     field is the parameter ``K_H``, at the other knots ``K_H_f<A>``. Linear in all of
     them, so the same least squares identifies the curve.
     """
@@ -269,11 +301,24 @@ class HoistDrive(Term):
         if self.above not in ("slope", "flat"):
             raise ValueError(f"hyper.hoist_drive.above_top_knot: expected 'slope' or "
                              f"'flat', got {self.above!r}")
+        self.below = str(hyper.get("below_bottom_knot", "proportional"))
+        """How the curve goes on below the lowest knot: ``slope`` (what the calibration
+        writes now) or ``proportional`` (params files written before it)."""
+        if self.below not in ("slope", "proportional"):
+            raise ValueError(f"hyper.hoist_drive.below_bottom_knot: expected 'slope' or "
+                             f"'proportional', got {self.below!r}")
+        self.ends = str(hyper.get("spline_ends", "natural"))
+        """The spline's end condition: ``not-a-knot`` (what the calibration writes now) or
+        ``natural`` (params files written before it)."""
+        if self.ends not in ("not-a-knot", "natural"):
+            raise ValueError(f"hyper.hoist_drive.spline_ends: expected 'not-a-knot' or "
+                             f"'natural', got {self.ends!r}")
 
     def _basis(self, k: Kinematics) -> np.ndarray:
         if len(self.knots) == 1:
             return np.ones((len(k), 1))
-        return field_basis(k.i_hf, self.knots, self.above == "slope")
+        return field_basis(k.i_hf, self.knots, self.above == "slope", self.below == "slope",
+                           self.ends)
 
     def columns(self, k: Kinematics) -> np.ndarray:
         return self.current_columns(k, k.i_h)

@@ -176,16 +176,18 @@ def test_the_daemon_and_the_engine_start_without_scipy_or_filterpy() -> None:
     assert out == "[]"
 
 
-@pytest.mark.parametrize("knots", [(30.0, 40.0, 50.0), (30.0, 40.0, 50.0, 60.0, 70.0),
+@pytest.mark.parametrize("ends", ["natural", "not-a-knot"])
+@pytest.mark.parametrize("knots", [(30.0, 40.0, 50.0), (30.0, 40.0, 50.0, 60.0),
+                                   (30.0, 40.0, 50.0, 60.0, 70.0),
                                    (25.0, 31.0, 47.0, 52.0, 70.0, 71.5)])
-def test_field_spline_is_scipys_natural_cubic_spline(knots: tuple[float, ...]) -> None:
+def test_field_spline_is_scipys_cubic_spline(knots: tuple[float, ...], ends: str) -> None:
     from scipy.interpolate import CubicSpline
 
-    from shoveld.model.terms import _NaturalSpline
+    from shoveld.model.terms import _CubicSpline
 
     x = np.linspace(knots[0], knots[-1], 301)
-    ref = CubicSpline(np.asarray(knots), np.eye(len(knots)), bc_type="natural")(x)
-    assert np.allclose(_NaturalSpline(knots)(x), ref, rtol=1e-10, atol=1e-12)
+    ref = CubicSpline(np.asarray(knots), np.eye(len(knots)), bc_type=ends)(x)
+    assert np.allclose(_CubicSpline(knots, ends)(x), ref, rtol=1e-10, atol=1e-12)
 
 
 def test_the_newey_west_sums_carry_lags_across_blocks() -> None:

@@ -86,6 +86,22 @@ def test_an_output_in_a_missing_folder_is_one_line(tmp_path: Path, capsys,
     assert "no/such" in err and "does not exist" in err
 
 
+@pytest.mark.parametrize(("key", "old", "new"), [("below_bottom_knot", "proportional", "slope"),
+                                                 ("spline_ends", "natural", "not-a-knot")])
+def test_the_field_curve_below_its_lowest_knot_and_its_ends_are_read_or_refused(
+        tmp_path: Path, key: str, old: str, new: str) -> None:
+    """Files written before each key keep the curve they were identified with."""
+    attr = {"below_bottom_knot": "below", "spline_ends": "ends"}[key]
+    assert getattr(load_params(GOOD).model().terms[1], attr) == old
+    head = "[hyper.hoist_drive]\n"
+    p = variant(tmp_path, head, head + f'{key} = "{new}"\n')
+    assert getattr(load_params(p).model().terms[1], attr) == new
+    p = variant(tmp_path, head, head + f'{key} = "up"\n')
+    with pytest.raises(ParamsFileError, match=rf"params\.toml: hyper\.hoist_drive\.{key}: "
+                                              rf"expected '{new}' or '{old}', got 'up'"):
+        load_params(p)
+
+
 def test_the_field_curve_above_its_top_knot_is_read_or_refused(tmp_path: Path) -> None:
     """Files written before the key keep the flat curve they were identified with."""
     assert load_params(GOOD).model().terms[1].above == "flat"
