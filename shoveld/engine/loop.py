@@ -160,6 +160,10 @@ class Engine:
         # causally here, sample by sample, as their transform does offline.
         self.streams = [f for t in self.model.terms
                         if (f := getattr(t, "stream", lambda: None)()) is not None]
+        # The settings read at every tick, as plain attributes (one lookup, not two).
+        self._warmup_s = self.cfg.warmup_s
+        self._settle_s = self.cfg.settle_s
+        self._kalman_rates = self.cfg.payload_rates == "kalman"
 
     # -- public -----------------------------------------------------------------------
     def step(self, s: Sample) -> list[Event]:
@@ -169,26 +173,30 @@ class Engine:
         events: list[Event] = []
         t = s.time_s
         bad = s.invalid
-        z_th = math.nan if "handle_deg" in bad else math.radians(s.handle_deg)
-        z_d = math.nan if "crowd_m" in bad else s.crowd_m
-        z_sw = math.nan if "swing_deg" in bad else math.radians(s.swing_deg)
+        if bad:
+            z_th = math.nan if "handle_deg" in bad else math.radians(s.handle_deg)
+            z_d = math.nan if "crowd_m" in bad else s.crowd_m
+            z_sw = math.nan if "swing_deg" in bad else math.radians(s.swing_deg)
+        else:
+            z_th, z_d, z_sw = math.radians(s.handle_deg), s.crowd_m, math.radians(s.swing_deg)
         th, thd, thdd = self.f_th.update(t, z_th)
         d, dd, ddd = self.f_d.update(t, z_d)
         sw, swd, swdd = self.f_sw.update(t, z_sw)
-        prev = self.phases.phase
-        if math.isnan(self.t0):
+        phases = self.phases
+        prev = phases.phase
+        if self.t0 != self.t0:  # NaN: the first sample
             self.t0 = t
-        if t - self.t0 >= self.cfg.warmup_s:
-            ph = self.phases.update(t, math.degrees(th), math.degrees(thd), math.degrees(swd),
-                                    dd)
+        if t - self.t0 >= self._warmup_s:
+            ph = phases.update(t, math.degrees(th), math.degrees(thd), math.degrees(swd), dd)
         else:
             ph = prev
         if ph != prev:
             events.extend(self._transition(prev, ph, t))
         valid = False
-        settled = ph in ESTIMATING and t - self.dig_end >= self.cfg.settle_s
+        estimating = ph in ESTIMATING
+        settled = estimating and t - self.dig_end >= self._settle_s
         lag = self.lagged
-        if self.cfg.payload_rates == "kalman":
+        if self._kalman_rates:
             if settled and self.rls is not None:
                 valid = self._update(s, th, d, sw, thd, dd, swd, thdd, ddd, swdd)
         else:
@@ -198,13 +206,14 @@ class Engine:
             valid = self._lagged(lag.push_tag(
                 t, (z_th, z_d, 0.0 if z_sw != z_sw else z_sw), (s, settled, self._cycle)),
                 ph) or valid
-        if self.batch and ph not in ESTIMATING:
+        if self.batch and not estimating:
             self._flush()
-        if self.rls is not None and self.rls.n:
-            if self._cached[0] != self.rls.n:  # the filter moves only when a block is applied
-                self._cached = (self.rls.n, self.rls.payload_kg, self._std())
-            est = LiveEstimate(t, PHASES[ph], self._cached[1], self._cached[2],
-                               valid or ph not in ESTIMATING)
+        rls = self.rls
+        if rls is not None and rls.n:
+            cached = self._cached
+            if cached[0] != rls.n:  # the filter moves only when a block is applied
+                cached = self._cached = (rls.n, rls.payload_kg, self._std())
+            est = LiveEstimate(t, PHASES[ph], cached[1], cached[2], valid or not estimating)
         else:
             est = LiveEstimate(t, PHASES[ph], math.nan, math.nan, False)
         self.last = est
@@ -274,8 +283,10 @@ class Engine:
             return False
         s_lag, settled_lag, cycle_lag = tag
         if settled_lag and cycle_lag == self._cycle and self.rls is not None:
-            kin = self.lagged.derivatives()  # the fit only where it is used
-            return self._update(s_lag, *kin[0], *kin[1], *kin[2])
+            # the fit only where it is used; as Python floats, which the checks and the
+            # batch's array take faster than numpy scalars (the same values)
+            q, v, a = self.lagged.derivatives().tolist()
+            return self._update(s_lag, *q, *v, *a)
         return False
 
     def _update(self, s: Sample, th: float, d: float, sw: float, thd: float, dd: float,
@@ -316,10 +327,11 @@ class Engine:
             ce = CurrentEquations(self.model, k)
             a, b = ce.payload_equations(self.p)
             sig = current_sigma(self.current_noise, ce, self.p)
+            jac = ce.jacobian(self.p, m)
             ok = np.isfinite(a).all(axis=1) & np.isfinite(b).all(axis=1)
             if not ok.all():
-                a, b, sig = a[ok], b[ok], sig[ok]
-            self.rls.update(a, b, -ce.jacobian(self.p, m)[ok], sigma=sig)
+                a, b, sig, jac = a[ok], b[ok], sig[ok], jac[ok]
+            self.rls.update(a, b, -jac, sigma=sig)
             return
         w, phi, psi = self.model.regressor(k)
         a = phi + psi @ self.p

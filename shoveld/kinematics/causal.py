@@ -66,7 +66,8 @@ class Kalman3:
         self.x = self.x + k * (z - self.x[0])
         ikh = self._eye.copy()
         ikh[:, 0] -= k
-        self.P = ikh @ P @ ikh.T + self.r * np.outer(k, k)
+        # k k' as a broadcast product: np.outer's own arithmetic, without its wrapper
+        self.P = ikh @ P @ ikh.T + self.r * (k[:, None] * k)
         self.K = k
 
 
@@ -96,6 +97,22 @@ class JointFilter:
     def update(self, t: float, z: float) -> tuple[float, float, float]:
         """Feed the measurement at time t (NaN: missing); return (q, q', q'')."""
         last = self._last_t
+        steady = self._steady
+        if steady is not None and z == z and last is not None and not t - last > self._late:
+            # The common tick (converged filter, the next sample, a value): the gain is
+            # constant, so the update is a few float operations on the state held as
+            # Python floats (``kf.x`` is written back when the steady state ends).
+            self._last_t = t
+            qva = self._qva
+            q, v, a = qva
+            dt = self.dt
+            q, v = q + v * dt + 0.5 * a * dt * dt, v + a * dt
+            k0, k1, k2 = steady
+            e = z - q
+            qva[0] = q = q + k0 * e
+            qva[1] = v = v + k1 * e
+            qva[2] = a = a + k2 * e
+            return q, v, a
         if last is None:
             if math.isnan(z):
                 return math.nan, math.nan, math.nan
@@ -112,10 +129,8 @@ class JointFilter:
                 if self._last_t is None:  # coasted too long: restart at this sample
                     return self.update(t, z)
         self._last_t = t
-        if self._steady is not None:
-            if z == z:  # not NaN
-                return self._steady_update(z)
-            self._leave_steady()
+        # (a steady filter gets here only for a missing value or after skipped ticks)
+        self._leave_steady()
         self.kf.predict()
         if math.isnan(z):
             self._coast += self.dt
@@ -134,22 +149,7 @@ class JointFilter:
                 x = self.kf.x
                 self._qva = [float(x[0]), float(x[1]), float(x[2])]
             self._prev_p = p00
-        x = self.kf.x
-        return float(x[0]), float(x[1]), float(x[2])
-
-    def _steady_update(self, z: float) -> tuple[float, float, float]:
-        """Steady-state update on the state held as Python floats (the same double
-        arithmetic as on ``kf.x``, without a numpy element access per term); ``kf.x``
-        is written back when the steady state ends (:meth:`state`)."""
-        qva = self._qva
-        q, v, a = qva
-        dt = self.dt
-        q, v = q + v * dt + 0.5 * a * dt * dt, v + a * dt
-        k0, k1, k2 = self._steady  # type: ignore[misc]
-        e = z - q
-        qva[0] = q = q + k0 * e
-        qva[1] = v = v + k1 * e
-        qva[2] = a = a + k2 * e
+        q, v, a = self.kf.x.tolist()
         return q, v, a
 
     def _leave_steady(self) -> None:

@@ -128,7 +128,7 @@ class FixedLagSavgol(Generic[T]):
         ring = self._ring
         hole = values is None
         ring[pos] = ring[pos + w] = 0.0 if hole else values
-        was = self._hole[pos]
+        was = bool(self._holes) and bool(self._hole[pos])  # (a ring without holes: no read)
         if hole or was:  # the holes' bookkeeping, only where one comes or goes
             self._hole[pos] = self._hole[pos + w] = hole
             self._holes += int(hole) - int(was)

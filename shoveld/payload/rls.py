@@ -89,19 +89,24 @@ class PayloadRls:
         p = self.p + (self.cfg.forgetting_std_kg_per_s**2) * self.dt * n
         # Update in information form: S = a a' p + R, so by Woodbury
         # y' S^-1 y = y' R^-1 y - (a' R^-1 y)^2 / (1/p + a' R^-1 a).
+        # (the arrays' own reductions: the same sums as np.sum, without its dispatch,
+        # which on blocks of ten rows cost as much as the arithmetic)
         y = b - a * self.x
         wa = a / var
         waa = wa * a
-        info = float(np.sum(waa))
-        ay = float(np.sum(wa * y))
+        info = float(waa.sum())
+        ay = float((wa * y).sum())
         prec = 1.0 / p + info
         self.p = 1.0 / prec
         self.x += ay / prec
-        self._nis_sum += float(np.sum(y * y / var)) - ay * ay / prec
+        self._nis_sum += float((y * y / var).sum()) - ay * ay / prec
         self._nis_dof += 2 * n
-        self._info += np.sum(waa, axis=0)
+        self._info += waa.sum(axis=0)
         if self.hac_lag > 0:
-            self._hac_add(np.stack([np.sum(wa * b, axis=1), np.sum(waa, axis=1)], axis=1))
+            uc = np.empty((n, 2))
+            uc[:, 0] = (wa * b).sum(axis=1)
+            uc[:, 1] = waa.sum(axis=1)
+            self._hac_add(uc)
         else:
             self._lag1(y / np.sqrt(var))
         if db_dp is not None:
@@ -126,7 +131,7 @@ class PayloadRls:
         """Add a block's (u, c) rows to the Newey-West sums: lag 0, and each lag up to
         ``hac_lag`` with its Bartlett weight, pairing every new row with those before
         (the rows before a pass's first are zeros, which add nothing)."""
-        rows = np.vstack([self._tail, uc])
+        rows = np.concatenate((self._tail, uc))
         u, c = uc[:, 0], uc[:, 1]
         # for each new row, the Bartlett-weighted sum of the lag rows before it
         bu = np.convolve(rows[:, 0], self._weights, "valid")
