@@ -167,6 +167,22 @@ def fit_output(model: Model, kins: list[Kinematics], payloads: list[np.ndarray],
         w = np.where(good, 1.0 / sig, 0.0)
         return np.where(good, r, 0.0) * w, w
 
+    def gauss_newton(p: np.ndarray, sig: np.ndarray, correction: np.ndarray | None = None
+                     ) -> tuple[np.ndarray, np.ndarray]:
+        """The Gauss-Newton step of the weighted fit at ``p`` (of the score less
+        ``correction``, if given), columns scaled to unit norm; and the weighted
+        residual there."""
+        rw, w = weighted(p, sig)
+        jw = ce.jacobian(p, m) * w[:, :, None]
+        jw = np.where(np.isfinite(jw), jw, 0.0).reshape(-1, n_p)
+        scale = np.linalg.norm(jw, axis=0)
+        scale[scale == 0] = 1.0
+        jn = jw / scale
+        g = jn.T @ rw.reshape(-1)
+        if correction is not None:
+            g = g - correction / scale
+        return np.linalg.lstsq(jn.T @ jn, -g, rcond=None)[0] / scale, rw
+
     r0 = ce.residual(p, m)
     good0 = ok & np.isfinite(r0)
     sig = np.ones_like(r0) * np.array([np.sqrt(np.mean(r0[good0[:, j], j] ** 2))
@@ -175,13 +191,7 @@ def fit_output(model: Model, kins: list[Kinematics], payloads: list[np.ndarray],
     for _outer in range(4):
         for _ in range(max_iter):
             iterations += 1
-            rw, w = weighted(p, sig)
-            jw = ce.jacobian(p, m) * w[:, :, None]
-            jw = np.where(np.isfinite(jw), jw, 0.0).reshape(-1, n_p)
-            scale = np.linalg.norm(jw, axis=0)
-            scale[scale == 0] = 1.0
-            jn = jw / scale
-            step = np.linalg.lstsq(jn.T @ jn, -(jn.T @ rw.reshape(-1)), rcond=None)[0] / scale
+            step, rw = gauss_newton(p, sig)
             cost = float(np.sum(rw * rw))
             lam = 1.0
             while lam > 1e-4:
@@ -214,14 +224,7 @@ def fit_output(model: Model, kins: list[Kinematics], payloads: list[np.ndarray],
         correction = field_noise_correction(model, k, ce, p, m, w * w, field_noise**2)
         for _ in range(max_iter):
             iterations += 1
-            rw, w = weighted(p, sig)
-            jw = ce.jacobian(p, m) * w[:, :, None]
-            jw = np.where(np.isfinite(jw), jw, 0.0).reshape(-1, n_p)
-            score = jw.T @ rw.reshape(-1) - correction
-            scale = np.linalg.norm(jw, axis=0)
-            scale[scale == 0] = 1.0
-            jn = jw / scale
-            step = np.linalg.lstsq(jn.T @ jn, -score / scale, rcond=None)[0] / scale
+            step, _ = gauss_newton(p, sig, correction)
             p = p + step
             if np.max(np.abs(step) / (np.abs(p) + 1e-9)) < 1e-7:
                 break
