@@ -15,15 +15,15 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
 from shoveld.identify import ANGLE_DRIFT_DEG, output_error
 from shoveld.identify.output_error import fit_output
-from shoveld.kinematics import DEFAULT_POLYORDER, DEFAULT_WINDOW_S
-from shoveld.kinematics.offline import offline_kinematics
+from shoveld.kinematics import DEFAULT_POLYORDER, DEFAULT_WINDOW_S, window_samples
+from shoveld.kinematics.offline import difference_noise, offline_kinematics
 from shoveld.model.kin import Kinematics
 from shoveld.model.model import EQUATIONS, Model
 from shoveld.model.params import ModelParams
@@ -63,6 +63,9 @@ class FileData:
     use: np.ndarray
     static: np.ndarray
     excluded: Counter[str]
+    noise: dict[str, float] = field(default_factory=dict)
+    """White noise (1 sigma) of the position readings the kinematics are smoothed from,
+    from their third differences: ``th`` (rad) and ``d`` (m)."""
 
 
 NEIGHBOUR_CURRENTS_S = 0.5
@@ -118,7 +121,33 @@ def exclusion_masks(table: SignalsTable, model: Model, cfg: ExclusionConfig,
     for name in ("thd", "thdd", "dd", "ddd"):
         getattr(kin, name)[static] = 0.0
     excluded = Counter(str(r) for r in reasons[~use])
-    return FileData(table.source, kin, payload, use, static, excluded)
+    noise = {"th": difference_noise(np.radians(cols["handle_deg"]), 3),
+             "d": difference_noise(cols["crowd_m"], 3)}
+    return FileData(table.source, kin, payload, use, static, excluded, noise)
+
+
+POSITION_SENSORS = {"th": ("thd", "thdd"), "d": ("dd", "ddd")}
+"""The position readings whose noise the fit corrects for, and the rate and
+acceleration smoothed from each."""
+
+
+def position_noise_errors(files: list[FileData], window_s: float, polyorder: int
+                          ) -> list[output_error.InputError]:
+    """The handle angle's and the crowd extension's noise as errors in the rates and
+    accelerations of the used samples (files concatenated as the fit takes them).
+
+    On held poses the rates and accelerations are set to zero, not smoothed from the
+    readings, so there they carry no error."""
+    dt = float(np.median(np.concatenate([np.diff(f.kin.t) for f in files])))
+    window = window_samples(window_s, dt, polyorder)
+    moving = np.concatenate([~f.static[f.use] for f in files]).astype(float)
+    errors = []
+    for key, names in POSITION_SENSORS.items():
+        sigma = float(np.median([f.noise.get(key, 0.0) for f in files]))
+        if sigma > 0:
+            errors += [replace(e, shift={n: moving for n in e.shift})
+                       for e in output_error.rate_errors(sigma, names, dt, window, polyorder)]
+    return errors
 
 
 def fixed_load_trial(table: SignalsTable) -> bool:
@@ -256,6 +285,9 @@ class Calibrator:
     angle_drift_deg: float = ANGLE_DRIFT_DEG
     """The handle-angle sensor's slow drift within a file (1 sigma), counted in the
     standard errors; 0 leaves it out."""
+    position_noise: bool = True
+    """Correct the fit for the handle angle's and the crowd extension's noise (errors in
+    variables, :func:`position_noise_errors`); False: as before 2026-11-26."""
     files_: list[FileData] = field(default_factory=list, init=False)
     params_: ModelParams | None = field(default=None, init=False)
     output_fit_: output_error.OutputFit | None = field(default=None, init=False)
@@ -342,7 +374,10 @@ class Calibrator:
                             [np.asarray(o) for o in oks], p,
                             angle_drift_deg=self.angle_drift_deg,
                             field_noise=float(np.median([output_error.field_noise_a(
-                                f.kin.i_hf) for f in files])))
+                                f.kin.i_hf) for f in files])),
+                            input_errors=position_noise_errors(
+                                files, self.window_s, self.polyorder)
+                            if self.position_noise else ())
             self.output_fit_ = of
             p, cov = of.p, of.cov
             sigma = np.array([of.force_rms["handle"], of.force_rms["crowd"]])
@@ -355,6 +390,11 @@ class Calibrator:
                                   f"{output_error.BLOCK_S:g} s, plus a handle-angle drift "
                                   f"of {self.angle_drift_deg:g} deg per file",
                        angle_drift_deg=self.angle_drift_deg)
+            if self.position_noise:
+                # What the errors-in-variables correction took each reading's noise to be.
+                fit["position_noise"] = {
+                    "handle_deg": math.degrees(float(np.median([f.noise["th"] for f in files]))),
+                    "crowd_m": float(np.median([f.noise["d"] for f in files]))}
         else:
             cond = condition_number((w_all / sigma[None, :, None]).reshape(-1, len(names)))
             fit.update(condition_number=cond,

@@ -10,10 +10,12 @@ is estimated from the residuals and the fit repeated with it (iteratively
 reweighted). Gauss-Newton from the equation-error solution; the problem is nearly
 linear, so a few steps converge.
 
-One regressor is measured: the hoist field current, through K_H(i_f). Its noise
-biased the curve's knots by up to 0.6 standard errors, so the final steps solve a
-corrected score that takes out its expected part (:func:`field_noise_correction`),
-with the channel's noise read from the field column itself (:func:`field_noise_a`).
+Some inputs of the equations are measured, not known: the hoist field current,
+through K_H(i_f), and the rates and accelerations smoothed from the noisy angle and
+extension readings. Their noise biased the field curve's knots by up to 0.6 standard
+errors and K_C by 0.5, so the final steps solve a corrected score that takes out its
+expected part (:func:`input_noise_correction`), with each reading's noise read from
+its own column (:func:`field_noise_a`, ``calibrate.position_noise_errors``).
 
 Standard errors are the sandwich (heteroscedasticity and autocorrelation robust)
 estimate over blocks of a few seconds: samples at 50 Hz are not independent, and a
@@ -30,11 +32,13 @@ drift switched off in the simulator, in 91-96 %.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
 from shoveld.identify import ANGLE_DRIFT_DEG
+from shoveld.kinematics.offline import difference_noise, smoothed_noise_sd
 from shoveld.model.kin import Kinematics
 from shoveld.model.model import Model
 from shoveld.model.output import CHANNELS, NOISE_KEYS, CurrentEquations, noise_regressors
@@ -107,47 +111,87 @@ def field_noise_a(i_hf: np.ndarray) -> float:
     tenths of a second against 50 Hz samples), so a second difference is noise (its
     variance 6 sigma^2) except at the few kinks where the drive changes its setpoint;
     the median ignores those."""
-    d2 = np.diff(np.asarray(i_hf, dtype=float), 2)
-    d2 = d2[np.isfinite(d2)]
-    if len(d2) < 10:
-        return 0.0
-    return float(1.4826 * np.median(np.abs(d2)) / math.sqrt(6.0))
+    return difference_noise(i_hf, 2)
 
 
-def field_noise_correction(model: Model, k: Kinematics, ce: CurrentEquations, p: np.ndarray,
-                           m: np.ndarray, w2: np.ndarray, var_f: float) -> np.ndarray:
-    """(parameters,) the expected part of the weighted score sum w^2 J r that the field
-    channel's noise causes at the true parameters, to subtract from it (a corrected
-    score for errors in a regressor).
+@dataclass(frozen=True)
+class InputError:
+    """One independent error pattern of the measured inputs of the equations.
 
-    The predicted hoist current depends on the measured field through K_H(i_f), so
-    noise u in that reading is in both the residual r and its Jacobian J. To second
-    order in u, with r', r'' and J' the derivatives in the field reading,
-    E[J r] = (J r''/2 + J' r') var_f. Left in, it pulled the lowest and highest field
-    knots by about 0.6 standard errors over 120 simulated machines.
+    ``shift``: how much each ``Kinematics`` field moves per unit of the error (a number,
+    or one per sample);
+    ``variance``: the error's variance in those units; ``step``: the finite-difference
+    step (units) with which its effect on the equations is taken.
     """
-    h = 0.5
-    cp = CurrentEquations(model, replace(k, i_hf=k.i_hf + h))
-    cm = CurrentEquations(model, replace(k, i_hf=k.i_hf - h))
-    r0, rp, rm = ce.residual(p, m), cp.residual(p, m), cm.residual(p, m)
-    r1 = (rp - rm) / (2 * h)
-    r2 = (rp - 2 * r0 + rm) / (h * h)
+
+    shift: dict[str, float | np.ndarray]
+    variance: float = 1.0
+    step: float = 1.0
+
+
+def field_error(sigma_a: float) -> InputError:
+    """The field-current reading's noise as an input error (the step is half an ampere,
+    small against the curve's knot spacing of 10 A)."""
+    return InputError({"i_hf": 1.0}, sigma_a**2, 0.5)
+
+
+def rate_errors(sigma: float, fields: tuple[str, str], dt: float, window: int,
+                polyorder: int) -> list[InputError]:
+    """A position reading's white noise ``sigma`` as the errors it leaves in the rate and
+    the acceleration smoothed from it (``fields``), independent of each other.
+
+    The smoothed value's own error (0.3 of ``sigma``: 0.009 deg on the handle)
+    is left out: measured, it moved no parameter by 0.2 % of what the rate's and the
+    acceleration's errors move it, and each error costs two evaluations of the
+    equations' Jacobian."""
+    _, sd_rate, sd_acc = smoothed_noise_sd(sigma, dt, window, polyorder)
+    return [InputError({f: 1.0}, sd * sd, sd) for f, sd in zip(fields, (sd_rate, sd_acc),
+                                                               strict=True)]
+
+
+def input_noise_correction(model: Model, k: Kinematics, ce: CurrentEquations, p: np.ndarray,
+                           m: np.ndarray, w2: np.ndarray, errors: list[InputError]
+                           ) -> np.ndarray:
+    """(parameters,) the expected part of the weighted score sum w^2 J r that noise in
+    the measured inputs causes at the true parameters, to subtract from it (a corrected
+    score for errors in variables).
+
+    The predicted currents depend on measured inputs (the field current through
+    K_H(i_f); the angles and their smoothed rates and accelerations through every
+    term), so an input's noise u is in both the residual r and its Jacobian J. To
+    second order in u, with r', r'' and J' the derivatives along the error,
+    E[J r] = (J r''/2 + J' r') var(u), summed over independent errors. Left in, the
+    field reading's noise pulled the lowest and highest field knots by about 0.6
+    standard errors over 120 simulated machines, and the angles' noise K_C by 0.5.
+    """
+    total = np.zeros(len(p))
     jac = ce.jacobian(p, m)
-    j1 = (cp.jacobian(p, m) - cm.jacobian(p, m)) / (2 * h)
-    term = (jac * (0.5 * r2)[:, :, None] + j1 * r1[:, :, None]) * w2[:, :, None]
-    return np.einsum("kep->p", np.where(np.isfinite(term), term, 0.0)) * var_f
+    r0 = ce.residual(p, m)
+    for e in errors:
+        h = e.step
+        moved = [CurrentEquations(model, replace(k, **{f: getattr(k, f) + sign * h * a
+                                                       for f, a in e.shift.items()}))
+                 for sign in (1.0, -1.0)]
+        rp, rm = (c.residual(p, m) for c in moved)
+        r1 = (rp - rm) / (2 * h)
+        r2 = (rp - 2 * r0 + rm) / (h * h)
+        j1 = (moved[0].jacobian(p, m) - moved[1].jacobian(p, m)) / (2 * h)
+        term = (jac * (0.5 * r2)[:, :, None] + j1 * r1[:, :, None]) * w2[:, :, None]
+        total += np.einsum("kep->p", np.where(np.isfinite(term), term, 0.0)) * e.variance
+    return total
 
 
 def fit_output(model: Model, kins: list[Kinematics], payloads: list[np.ndarray],
                row_ok: list[np.ndarray], p0: np.ndarray, max_iter: int = 25,
-               angle_drift_deg: float = ANGLE_DRIFT_DEG, field_noise: float = 0.0
-               ) -> OutputFit:
+               angle_drift_deg: float = ANGLE_DRIFT_DEG, field_noise: float = 0.0,
+               input_errors: Sequence[InputError] = ()) -> OutputFit:
     """Fit ``model`` to the used samples of each file (kinematics ``kins``, known
     payloads, and per-sample per-channel masks ``row_ok``), starting from ``p0``;
     ``angle_drift_deg``: the handle-angle sensor's drift within a file (1 sigma), whose
     effect is added to the covariance (0: not); ``field_noise``: the field-current
     channel's noise (A, 1 sigma: :func:`field_noise_a`), whose bias on the fit is
-    removed (0: not)."""
+    removed (0: not); ``input_errors``: other noise in the inputs (the angles':
+    :func:`sensor_errors`), whose bias is removed likewise."""
     k = concat_kinematics(kins)
     m = np.concatenate(payloads)
     ok = np.concatenate(row_ok).astype(bool)
@@ -215,13 +259,16 @@ def fit_output(model: Model, kins: list[Kinematics], payloads: list[np.ndarray],
             break
         sig = new
 
+    errors = list(input_errors)
     if field_noise > 0 and any(getattr(t, "uses_field_current", False)
                                for t in model.terms):
+        errors.insert(0, field_error(field_noise))
+    if errors:
         # Solve the corrected score equations J'W r - correction = 0 by Gauss-Newton.
         # The problem is nearly linear and the correction small, so it is evaluated once,
         # at the uncorrected solution.
         _, w = weighted(p, sig)
-        correction = field_noise_correction(model, k, ce, p, m, w * w, field_noise**2)
+        correction = input_noise_correction(model, k, ce, p, m, w * w, errors)
         for _ in range(max_iter):
             iterations += 1
             step, _ = gauss_newton(p, sig, correction)

@@ -9,10 +9,12 @@ The window and order are :mod:`shoveld.kinematics`'s defaults.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from shoveld.kinematics import DEFAULT_POLYORDER, DEFAULT_WINDOW_S, window_samples
-from shoveld.kinematics.savgol import savgol_filter
+from shoveld.kinematics.savgol import savgol_coeffs, savgol_filter
 from shoveld.model.kin import Kinematics
 from shoveld.signals.table import SignalsTable
 
@@ -39,6 +41,32 @@ def savgol_derivatives(y: np.ndarray, dt: float, window: int, valid: np.ndarray,
         half = window // 2
         ok[a + half:b - half] = True
     return out[0], out[1], out[2], ok
+
+
+def difference_noise(x: np.ndarray, order: int) -> float:
+    """A sensor's white noise (1 sigma) from the ``order``-th differences of its readings.
+
+    Where the true signal is smooth against the sample step, its ``order``-th difference
+    is noise alone, of variance C(2 order, order) sigma^2; the median (scaled to a
+    standard deviation) ignores the few samples where the signal itself turns sharply.
+    """
+    dk = np.diff(np.asarray(x, dtype=float), order)
+    dk = dk[np.isfinite(dk)]
+    if len(dk) < 10:
+        return 0.0
+    return float(1.4826 * np.median(np.abs(dk)) / math.sqrt(math.comb(2 * order, order)))
+
+
+def smoothed_noise_sd(sigma: float, dt: float, window: int,
+                      polyorder: int = DEFAULT_POLYORDER) -> tuple[float, float, float]:
+    """Standard deviations of the smoothed value, rate and acceleration that white noise
+    ``sigma`` on a reading leaves after :func:`savgol_derivatives` (away from edges).
+
+    The rate's weights are odd and the value's and acceleration's even, so the rate's
+    error is independent of the other two."""
+    v, r, a = (sigma * float(np.linalg.norm(savgol_coeffs(window, polyorder, deriv=k,
+                                                          delta=dt))) for k in range(3))
+    return v, r, a
 
 
 def offline_kinematics(cols: dict[str, np.ndarray] | SignalsTable,
