@@ -25,10 +25,12 @@ from typing import Any
 import numpy as np
 
 from drivers.base import DriverHealth, Reading
+from drivers.xsens.serial_driver import MtiSerialDriver
+from drivers.xsens.serial_span import MtiSpanReader, SpanRead
 from shoveld.daemon.assemble import DeviceState
 from shoveld.daemon.config import LASER_KINDS, MTI_KINDS, DeviceConfig
 from shoveld.daemon.store import ReadingStore
-from shoveld.daemon.syncreplay import SyncDevice, SyncReplay
+from shoveld.daemon.syncreplay import MemorySerial, SyncDevice, SyncReplay
 from shoveld.installation import Installation, unwrap_deg
 from shoveld.sample import SIGNAL_FIELDS, Sample
 from shoveld.signals.columns import BY_NAME
@@ -37,6 +39,10 @@ _COL = {name: i for i, name in enumerate(SIGNAL_FIELDS)}
 _BIT = {name: 1 << i for i, name in enumerate(SIGNAL_FIELDS)}
 """A bit per signal, for a tick's invalid set as one integer."""
 _EMPTY: frozenset[str] = frozenset()
+_SPAN_READ_TICKS = 1000
+"""Ticks a span read takes on at most (its buffers stay small; its cost is per call)."""
+_RETRY_MAX_TICKS = 64
+"""The longest wait, in ticks, before trying a span read again after one could not start."""
 OK, INVALID, STALE, DISCONNECTED, NO_DATA = range(5)
 STATES = ("ok", "invalid", "stale", "disconnected", "no_data")
 """Device states as the assembler names them (:class:`DeviceState`)."""
@@ -139,6 +145,15 @@ class BulkFeed:
             self.tracks[name] = tr
             self._devs[name] = SyncDevice(name, sync.drivers[name], sync.transports[name],
                                           tr.sink(self._at), sync.clock)
+        self._readers: dict[str, MtiSpanReader] = {}
+        """Devices whose driver reads a run of ticks at once (:mod:`drivers.xsens.serial_span`)."""
+        self._retry: dict[str, tuple[int, int]] = {}
+        """Per device with a span reader: (first tick to try one again, ticks to wait after
+        the next failure)."""
+        for name in self.devices:
+            drv, port = sync.drivers[name], sync.transports[name]
+            if isinstance(drv, MtiSerialDriver) and isinstance(port, MemorySerial):
+                self._readers[name] = MtiSpanReader(drv, port, self.period)
         self._swing_prev = math.nan
         self._next_health = -math.inf
         self.ticks = 0
@@ -165,6 +180,10 @@ class BulkFeed:
     def _run_device(self, name: str, k0: int, k1: int, look: set[int]) -> None:
         """Step one driver over ticks ``[k0, k1)``, alone (no other device's driver nor
         the engine runs in between: none depends on them)."""
+        reader = self._readers.get(name)
+        if reader is not None:
+            self._run_spans(name, reader, k0, k1, look)
+            return
         sd, tr = self._devs[name], self.tracks[name]
         transport, health = sd.transport, sd.driver.health
         clock, at, step = self.sync.clock, self._at, sd.step
@@ -183,6 +202,62 @@ class BulkFeed:
                 prev = c
             done(t >= end_t and getattr(transport, "exhausted", True)
                  and not transport.in_waiting)
+
+    def _run_spans(self, name: str, reader: MtiSpanReader, k0: int, k1: int,
+                   look: set[int]) -> None:
+        """Like :meth:`_run_device`, with the driver's span reads wherever they can do the
+        per-tick reads' work; the driver steps tick by tick elsewhere (handshakes,
+        resynchronising on noise, timeouts) and for a while after a span read could not
+        start, so a damaged stretch does not cost an attempt per tick."""
+        sd, tr = self._devs[name], self.tracks[name]
+        transport, health = sd.transport, sd.driver.health
+        clock, at, step = self.sync.clock, self._at, sd.step
+        conn, done = tr.connected.append, tr.done.append
+        end_t, period = self.sync.end_t, self.period
+        prev: bool | None = None
+        k, retry = k0, self._retry.get(name, (k0, 1))
+        while k < k1:
+            if health.connected and k >= retry[0]:
+                got = reader.read(k, min(k1, k + _SPAN_READ_TICKS))
+                if got is not None:
+                    self._take(tr, got, look, first=prev is not True)
+                    prev, retry = True, (k, 1)
+                    k += got.ticks
+                    clock.t, at[0] = 0.0 + (k - 1) * period, k - 1
+                    continue
+                retry = (k + retry[1], min(2 * retry[1], _RETRY_MAX_TICKS))
+            t = 0.0 + k * period
+            clock.t = t
+            at[0] = k
+            step(t)
+            c = health.connected
+            conn(c)
+            if c is not prev or k in look:
+                tr.health[k] = _health_copy(health)
+                prev = c
+            done(t >= end_t and getattr(transport, "exhausted", True)
+                 and not transport.in_waiting)
+            k += 1
+        self._retry[name] = retry
+
+    def _take(self, tr: Track, got: SpanRead, look: set[int], first: bool) -> None:
+        """A span read's readings, connection, end and health into the device's track."""
+        n, k0, period = got.ticks, got.k0, self.period
+        ticks = got.reading_ticks.tolist()
+        tr.tick.extend(ticks)
+        tr.t_host.extend([0.0 + k * period for k in ticks])
+        for key, col in zip(tr.keys, tr.cols, strict=True):
+            col.extend(got.values[key].tolist())
+        tr.connected.extend([True] * n)
+        t = (np.arange(k0, k0 + n) * period).tolist()
+        end_t = self.sync.end_t
+        tr.done.extend([ti >= end_t and ex for ti, ex in zip(t, got.exhausted.tolist(),
+                                                             strict=True)])
+        marks = sorted(k for k in look if k0 <= k < k0 + n)
+        if first:
+            marks = sorted({k0, *marks})
+        for k in marks:
+            tr.health[k] = got.health_after(k - k0)
 
     def _first_tick_at(self, t: float) -> int:
         """Index of the first tick at or after capture time ``t``."""

@@ -83,6 +83,15 @@ class MemorySerial:
             self._i = j
 
     @property
+    def position(self) -> int:
+        """Recorded chunks released so far."""
+        return self._i
+
+    def advance(self, j: int) -> None:
+        """Count the chunks before ``j`` as released and read (a span reader took them)."""
+        self._i = j
+
+    @property
     def exhausted(self) -> bool:
         return self._i >= len(self.stream)
 
