@@ -25,12 +25,14 @@ from typing import Any
 import numpy as np
 
 from drivers.base import DriverHealth, Reading
+from drivers.modbus_adc.driver import ModbusAdcDriver
+from drivers.modbus_adc.span import ModbusSpanReader, PollSpan
 from drivers.xsens.serial_driver import MtiSerialDriver
 from drivers.xsens.serial_span import MtiSpanReader, SpanRead
 from shoveld.daemon.assemble import DeviceState
 from shoveld.daemon.config import LASER_KINDS, MTI_KINDS, DeviceConfig
 from shoveld.daemon.store import ReadingStore
-from shoveld.daemon.syncreplay import MemorySerial, SyncDevice, SyncReplay
+from shoveld.daemon.syncreplay import MemoryModbus, MemorySerial, SyncDevice, SyncReplay
 from shoveld.installation import Installation, unwrap_deg
 from shoveld.sample import SIGNAL_FIELDS, Sample
 from shoveld.signals.columns import BY_NAME
@@ -39,6 +41,9 @@ _COL = {name: i for i, name in enumerate(SIGNAL_FIELDS)}
 _BIT = {name: 1 << i for i, name in enumerate(SIGNAL_FIELDS)}
 """A bit per signal, for a tick's invalid set as one integer."""
 _EMPTY: frozenset[str] = frozenset()
+SpanReader = MtiSpanReader | ModbusSpanReader
+"""A driver's reads of a run of ticks at once (``read(k0, k1)``; None where it cannot)."""
+DriverSpan = SpanRead | PollSpan
 _SPAN_READ_TICKS = 1000
 """Ticks a span read takes on at most (its buffers stay small; its cost is per call)."""
 _RETRY_MAX_TICKS = 64
@@ -145,7 +150,7 @@ class BulkFeed:
             self.tracks[name] = tr
             self._devs[name] = SyncDevice(name, sync.drivers[name], sync.transports[name],
                                           tr.sink(self._at), sync.clock)
-        self._readers: dict[str, MtiSpanReader] = {}
+        self._readers: dict[str, SpanReader] = {}
         """Devices whose driver reads a run of ticks at once (:mod:`drivers.xsens.serial_span`)."""
         self._retry: dict[str, tuple[int, int]] = {}
         """Per device with a span reader: (first tick to try one again, ticks to wait after
@@ -154,6 +159,8 @@ class BulkFeed:
             drv, port = sync.drivers[name], sync.transports[name]
             if isinstance(drv, MtiSerialDriver) and isinstance(port, MemorySerial):
                 self._readers[name] = MtiSpanReader(drv, port, self.period)
+            elif isinstance(drv, ModbusAdcDriver) and isinstance(port, MemoryModbus):
+                self._readers[name] = ModbusSpanReader(drv, port, port.registers, self.period)
         self._swing_prev = math.nan
         self._next_health = -math.inf
         self.ticks = 0
@@ -203,7 +210,7 @@ class BulkFeed:
             done(t >= end_t and getattr(transport, "exhausted", True)
                  and not transport.in_waiting)
 
-    def _run_spans(self, name: str, reader: MtiSpanReader, k0: int, k1: int,
+    def _run_spans(self, name: str, reader: SpanReader, k0: int, k1: int,
                    look: set[int]) -> None:
         """Like :meth:`_run_device`, with the driver's span reads wherever they can do the
         per-tick reads' work; the driver steps tick by tick elsewhere (handshakes,
@@ -240,7 +247,7 @@ class BulkFeed:
             k += 1
         self._retry[name] = retry
 
-    def _take(self, tr: Track, got: SpanRead, look: set[int], first: bool) -> None:
+    def _take(self, tr: Track, got: DriverSpan, look: set[int], first: bool) -> None:
         """A span read's readings, connection, end and health into the device's track."""
         n, k0, period = got.ticks, got.k0, self.period
         ticks = got.reading_ticks.tolist()

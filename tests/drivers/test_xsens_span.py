@@ -6,6 +6,7 @@ messages, a silence that times out)."""
 
 from __future__ import annotations
 
+import copy
 import math
 import shutil
 from collections.abc import Callable
@@ -32,7 +33,7 @@ Edit = Callable[[bytearray, list[int], FrameLayout], bytearray]
 
 
 def _health(h: DriverHealth) -> dict[str, Any]:
-    return h.as_dict()
+    return copy.deepcopy(h.as_dict())
 
 
 def _play(driver: MtiSerialDriver, port: MemorySerial, clock: StepClock, ticks: int,
