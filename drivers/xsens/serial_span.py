@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from drivers.base import DriverHealth
+from drivers.spanio import RecordedStream
 from drivers.xsens.bulk import KEYS, FrameLayout, Run, clean_run
 from drivers.xsens.mtdata2 import XDI
 from drivers.xsens.serial_driver import (
@@ -139,19 +140,8 @@ class MtiSpanReader:
         self.driver = driver
         self.port = port
         self.period = period
+        self.stream = RecordedStream(port)
         self._layouts: dict[bytes, FrameLayout] = {}
-        self._stream_len = -1
-
-    def _prepare(self) -> None:
-        """The recording as arrays (again if it changed since)."""
-        stream = self.port.stream
-        if len(stream) == self._stream_len:
-            return
-        self._times = np.array([c[0] for c in stream], dtype=float)
-        lens = np.array([len(c[1]) for c in stream], dtype=np.int64)
-        self._offs = np.concatenate([[0], np.cumsum(lens)])
-        self._data = np.frombuffer(b"".join(c[1] for c in stream), dtype=np.uint8)
-        self._stream_len = len(stream)
 
     def usable(self) -> bool:
         """Whether a span read can start now (connected, nothing unread on the port)."""
@@ -164,15 +154,9 @@ class MtiSpanReader:
         None if not even the first tick can be done so."""
         if not self.usable():
             return None
-        self._prepare()
-        d, port = self.driver, self.port
-        sniffer = d._parser._sniffer
-        tk = np.arange(k0, k1) * self.period
-        i0 = port.position
-        j = np.maximum(np.searchsorted(self._times, tk, side="right"), i0)
-        pending = np.frombuffer(bytes(sniffer._buf), dtype=np.uint8)
-        rel = len(pending) + self._offs[j] - self._offs[i0]  # bytes fed by each tick's end
-        buf = np.concatenate([pending, self._data[self._offs[i0]:self._offs[j[-1]]]])
+        d = self.driver
+        rel = self.stream.released(d._parser._sniffer._buf, k0, k1, self.period)
+        tk, j, buf = rel.t, rel.chunks, rel.data
         run = clean_run(buf, d._parser.max_payload, self._layouts)
         if run is None:
             return None
@@ -191,9 +175,9 @@ class MtiSpanReader:
         finite = np.isfinite(g).all(axis=1) & np.isfinite(acc).all(axis=1)
         bad = np.flatnonzero(ok & ~finite)
         clean_end = run.clean_end if not len(bad) else int(bad[0]) * length
-        nt = int(np.searchsorted(rel, clean_end, side="right"))  # ticks inside clean bytes
+        nt = int(np.searchsorted(rel.ends, clean_end, side="right"))  # ticks inside clean bytes
         ends = (np.arange(len(rows)) + 1) * length
-        arrive = np.searchsorted(rel, ends, side="left")  # tick index of each frame
+        arrive = np.searchsorted(rel.ends, ends, side="left")  # tick index of each frame
         # the data timeout: a tick whose read finds no frame for data_timeout_s raises
         got = np.full(len(tk), -np.inf)
         got[arrive[arrive < len(tk)]] = tk[arrive[arrive < len(tk)]]
@@ -204,7 +188,7 @@ class MtiSpanReader:
         if nt == 0:
             return None
         nf = int(np.searchsorted(arrive, nt, side="left"))  # frames read by those ticks
-        return self._commit(k0, nt, tk, j, rel, buf, run, nf, ok[:nf], cols, e, g, acc, pc,
+        return self._commit(k0, nt, tk, j, rel.ends, buf, run, nf, ok[:nf], cols, e, g, acc, pc,
                             stf, sw, last_valid)
 
     def _commit(self, k0: int, nt: int, tk: np.ndarray, j: np.ndarray, rel: np.ndarray,
@@ -259,7 +243,8 @@ class MtiSpanReader:
         vals = (e[:, 0], e[:, 1], e[:, 2], g[:, 0], g[:, 1], g[:, 2], acc[:, 0], acc[:, 1],
                 acc[:, 2], pc.astype(float), stf.astype(float), sw.astype(float))
         values = {k: v[:nf][em] for k, v in zip(VALUE_KEYS, vals, strict=True)}
-        return SpanRead(k0, nt, k0 + em_tick, values, j[:nt] >= len(self._times), base, cum)
+        return SpanRead(k0, nt, k0 + em_tick, values, j[:nt] >= self.stream.chunk_count, base,
+                        cum)
 
 
 def _ffill(a: np.ndarray) -> np.ndarray:

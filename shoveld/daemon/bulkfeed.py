@@ -24,6 +24,8 @@ from typing import Any
 
 import numpy as np
 
+from drivers.acuity.ar4000 import Ar4000Driver
+from drivers.acuity.span import Ar4000SpanReader, LineSpan
 from drivers.base import DriverHealth, Reading
 from drivers.modbus_adc.driver import ModbusAdcDriver
 from drivers.modbus_adc.span import ModbusSpanReader, PollSpan
@@ -41,9 +43,9 @@ _COL = {name: i for i, name in enumerate(SIGNAL_FIELDS)}
 _BIT = {name: 1 << i for i, name in enumerate(SIGNAL_FIELDS)}
 """A bit per signal, for a tick's invalid set as one integer."""
 _EMPTY: frozenset[str] = frozenset()
-SpanReader = MtiSpanReader | ModbusSpanReader
+SpanReader = MtiSpanReader | Ar4000SpanReader | ModbusSpanReader
 """A driver's reads of a run of ticks at once (``read(k0, k1)``; None where it cannot)."""
-DriverSpan = SpanRead | PollSpan
+DriverSpan = SpanRead | LineSpan | PollSpan
 _SPAN_READ_TICKS = 1000
 """Ticks a span read takes on at most (its buffers stay small; its cost is per call)."""
 _RETRY_MAX_TICKS = 64
@@ -159,6 +161,8 @@ class BulkFeed:
             drv, port = sync.drivers[name], sync.transports[name]
             if isinstance(drv, MtiSerialDriver) and isinstance(port, MemorySerial):
                 self._readers[name] = MtiSpanReader(drv, port, self.period)
+            elif isinstance(drv, Ar4000Driver) and isinstance(port, MemorySerial):
+                self._readers[name] = Ar4000SpanReader(drv, port, self.period)
             elif isinstance(drv, ModbusAdcDriver) and isinstance(port, MemoryModbus):
                 self._readers[name] = ModbusSpanReader(drv, port, port.registers, self.period)
         self._swing_prev = math.nan
