@@ -14,14 +14,13 @@ per-tick read takes over there.
 
 from __future__ import annotations
 
-import copy
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from drivers.acuity.ar4000 import DISTANCE, NO_TARGET, Ar4000Driver, parse_line
-from drivers.base import DriverHealth
+from drivers.base import DriverHealth, plain_copy
 from drivers.spanio import RecordedStream
 
 _LF = 0x0A
@@ -51,7 +50,7 @@ class LineSpan:
         b, c = self.base, self.cum
         h = DriverHealth(b.connected, b.messages + int(c["messages"][i]), b.bad_frames,
                          b.rejected_bytes, b.timeouts, b.reconnects, b.last_reading_t,
-                         b.last_error, copy.deepcopy(b.extra))
+                         b.last_error, plain_copy(b.extra))
         t = float(c["last_t"][i])
         if t == t:  # a line by then: not silent, its time the last reading's
             h.last_reading_t = t
@@ -143,9 +142,7 @@ class Ar4000SpanReader:
         would."""
         d = self.driver
         h = d.health
-        base = DriverHealth(h.connected, h.messages, h.bad_frames, h.rejected_bytes,
-                            h.timeouts, h.reconnects, h.last_reading_t, h.last_error,
-                            copy.deepcopy(h.extra))
+        base = h.snapshot()
         n = len(vals)
         no_target = vals == NO_TARGET
         implausible = ~no_target & ~((0.0 <= vals) & (vals <= d.config.max_plausible_m))

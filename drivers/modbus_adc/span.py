@@ -2,25 +2,24 @@
 
 Fast replay steps each driver once per 10 ms tick; for a polled module that is a
 schedule test, a recorded-register lookup, a decode per channel and the channel
-health per poll, in Python. :class:`ModbusSpanReader` does what the driver's free-running
-polls (``_read_free``) would do over a run of ticks in one go: the poll ticks from the
-same sequential schedule, each block's latest recorded answer found with
-``searchsorted``, the words decoded by the channels' own decoders (once per distinct
-word), the health and channel health as the polls leave them. It stops before the
-first poll that could do anything else (a recorded timeout or exception, no answer
-yet, a value that is not finite, the schedule falling behind); the per-tick read
-takes over there.
+health per poll, in Python. :class:`ModbusSpanReader` does what the driver's
+free-running polls (``_read_free``) would do over a run of ticks in one go: the poll
+ticks from the same sequential schedule, each block's latest recorded answer found
+with ``searchsorted``, the words decoded as columns (:meth:`Channel.decode_words`,
+the channels' decoders' arithmetic), the health and channel health as the polls
+leave them. It stops before the first poll that could do anything else (a recorded
+timeout or exception, no answer yet, a value that is not finite, the schedule
+falling behind); the per-tick read takes over there.
 """
 
 from __future__ import annotations
 
-import copy
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from drivers.base import DriverHealth
+from drivers.base import DriverHealth, plain_copy
 from drivers.capture.format import RegisterRead
 from drivers.modbus_adc.driver import ModbusAdcDriver
 
@@ -66,7 +65,7 @@ class PollSpan:
         """A copy of the driver's health as it was after tick ``k0 + i``."""
         b = self.base
         h = DriverHealth(b.connected, b.messages, b.bad_frames, b.rejected_bytes, b.timeouts,
-                         b.reconnects, b.last_reading_t, b.last_error, copy.deepcopy(b.extra))
+                         b.reconnects, b.last_reading_t, b.last_error, plain_copy(b.extra))
         n = int(self.polls[i])
         if n:
             _polled(h, n, float(self.times[n - 1]))
@@ -104,7 +103,6 @@ class ModbusSpanReader:
                 self._blocks = None
                 break
             self._blocks.append(_block(reads, count))
-        self._decoded: dict[str, dict[int, float]] = {}
 
     def usable(self) -> bool:
         """Whether span reads can start now (connected, polling on its own schedule)."""
@@ -139,9 +137,9 @@ class ModbusSpanReader:
             ok &= b.answered[np.maximum(idx, 0)]
             words.append(b.words[np.maximum(idx, 0)])
         values: dict[str, np.ndarray] = {}
-        for (_a, _c, _chans, decoders), w in zip(d._plan, words, strict=True):
-            for name, offset, decode, _h in decoders:
-                values[name] = v = self._decode(name, decode, w[:, offset])
+        for (address, _c, chans, _dec), w in zip(d._plan, words, strict=True):
+            for ch in chans:
+                values[ch.name] = v = ch.decode_words(w[:, ch.register - address])
                 ok &= np.isfinite(v)
         bad = np.flatnonzero(~ok)
         if len(bad):  # stop before that poll's tick
@@ -150,9 +148,7 @@ class ModbusSpanReader:
         if nt == 0 or (m == 0 and d._next_poll is None):
             return None
         h = d.health
-        base = DriverHealth(h.connected, h.messages, h.bad_frames, h.rejected_bytes,
-                            h.timeouts, h.reconnects, h.last_reading_t, h.last_error,
-                            copy.deepcopy(h.extra))
+        base = h.snapshot()
         if m:
             t_last = float(pt[m - 1])
             _polled(h, m, t_last)
@@ -162,16 +158,3 @@ class ModbusSpanReader:
         polls = np.bincount(at[:m], minlength=nt)[:nt].cumsum()
         return PollSpan(k0, nt, k0 + at[:m], {k: v[:m] for k, v in values.items()},
                         np.ones(nt, dtype=bool), base, polls, pt[:m])
-
-    def _decode(self, name: str, decode: Any, words: np.ndarray) -> np.ndarray:
-        """The channel's decoder on each word, called once per distinct word ever seen."""
-        known = self._decoded.setdefault(name, {})
-        uniq, inv = np.unique(words, return_inverse=True)
-        vals = np.empty(len(uniq))
-        for i, w in enumerate(uniq.tolist()):
-            v = known.get(w)
-            if v is None:
-                v = known[w] = decode(w)
-            vals[i] = v
-        return vals[inv] if len(words) else np.empty(0)
-

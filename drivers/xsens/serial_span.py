@@ -14,7 +14,6 @@ non-finite value, a timeout); the per-tick ``read`` takes over there.
 
 from __future__ import annotations
 
-import copy
 import logging
 import math
 from dataclasses import dataclass
@@ -22,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from drivers.base import DriverHealth
+from drivers.base import DriverHealth, plain_copy
 from drivers.spanio import RecordedStream
 from drivers.xsens.bulk import KEYS, FrameLayout, Run, clean_run
 from drivers.xsens.mtdata2 import XDI
@@ -118,7 +117,7 @@ class SpanRead:
         b, c = self.base, self.cum
         h = DriverHealth(b.connected, b.messages + int(c["messages"][i]),
                          b.bad_frames + int(c["bad_frames"][i]), b.rejected_bytes, b.timeouts,
-                         b.reconnects, b.last_reading_t, b.last_error, copy.deepcopy(b.extra))
+                         b.reconnects, b.last_reading_t, b.last_error, plain_copy(b.extra))
         t = float(c["last_reading_t"][i])
         if not math.isnan(t):
             h.last_reading_t = t
@@ -199,9 +198,7 @@ class MtiSpanReader:
         """Leave the driver, its parser and the port as the reads of ``nt`` ticks would."""
         d, port = self.driver, self.port
         h = d.health
-        base = DriverHealth(h.connected, h.messages, h.bad_frames, h.rejected_bytes,
-                            h.timeouts, h.reconnects, h.last_reading_t, h.last_error,
-                            copy.deepcopy(h.extra))
+        base = h.snapshot()
         arrive = np.searchsorted(rel, (np.arange(nf) + 1) * run.layout.length, side="left")
         em = np.flatnonzero(ok)  # the frames emitted
         counters = pc[:nf][em]

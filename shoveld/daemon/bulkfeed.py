@@ -16,7 +16,6 @@ gives what the stepped path gives on every committed capture.
 
 from __future__ import annotations
 
-import copy
 import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -35,7 +34,7 @@ from shoveld.daemon.assemble import DeviceState
 from shoveld.daemon.config import LASER_KINDS, MTI_KINDS, DeviceConfig
 from shoveld.daemon.store import ReadingStore
 from shoveld.daemon.syncreplay import MemoryModbus, MemorySerial, SyncDevice, SyncReplay
-from shoveld.installation import Installation, unwrap_deg
+from shoveld.installation import Installation
 from shoveld.sample import SIGNAL_FIELDS, Sample
 from shoveld.signals.columns import BY_NAME
 
@@ -126,11 +125,6 @@ class Span:
     state, readings so far)."""
 
 
-def _health_copy(h: DriverHealth) -> DriverHealth:
-    return DriverHealth(h.connected, h.messages, h.bad_frames, h.rejected_bytes, h.timeouts,
-                        h.reconnects, h.last_reading_t, h.last_error, copy.deepcopy(h.extra))
-
-
 class BulkFeed:
     """Samples of a capture for the service's ticks, built a span at a time."""
 
@@ -209,7 +203,7 @@ class BulkFeed:
             c = health.connected
             conn(c)
             if c is not prev or k in look:
-                tr.health[k] = _health_copy(health)
+                tr.health[k] = health.snapshot()
                 prev = c
             done(t >= end_t and getattr(transport, "exhausted", True)
                  and not transport.in_waiting)
@@ -244,7 +238,7 @@ class BulkFeed:
             c = health.connected
             conn(c)
             if c is not prev or k in look:
-                tr.health[k] = _health_copy(health)
+                tr.health[k] = health.snapshot()
                 prev = c
             done(t >= end_t and getattr(transport, "exhausted", True)
                  and not transport.in_waiting)
@@ -386,12 +380,8 @@ class BulkFeed:
             sig_bad[live & yaw_bad] |= _BIT["swing_deg"]
             # the unwrapped swing carries state from tick to tick, as in the assembler
             at = np.flatnonzero(live & ~yaw_bad)
-            prev, swing, out = self._swing_prev, inst.swing_deg, []
-            for y in yaw[at].tolist():
-                prev = unwrap_deg(prev, swing(y))
-                out.append(prev)
+            out, self._swing_prev = unwrapped_swing(inst, yaw[at], self._swing_prev)
             rows[at, _COL["swing_deg"]] = out
-            self._swing_prev = prev
         elif dev.kind in LASER_KINDS:
             (v,) = cols
             crowd = inst.crowd_m(v)  # NaN stays NaN
@@ -416,6 +406,21 @@ class BulkFeed:
                 sets[b] = frozenset(sg for i, sg in enumerate(SIGNAL_FIELDS) if b >> i & 1)
         return [Sample(*r, invalid=sets[b]) for r, b in zip(rows.tolist(), bad.tolist(),
                                                             strict=True)]
+
+
+def unwrapped_swing(inst: Installation, yaw: np.ndarray, prev: float
+                    ) -> tuple[list[float], float]:
+    """Swing angles of MTi yaws, each continued from the one before (the first from
+    ``prev``), and the last: ``unwrap_deg(prev, inst.swing_deg(y))`` in turn, with their
+    operations in their order (numpy's remainder is Python's float %), the swing of
+    the whole column at once and the unwrapping inlined."""
+    swing = inst.swing_yaw_sign * (np.remainder(yaw - inst.swing_yaw_zero_deg + 180.0,
+                                                360.0) - 180.0)
+    out = []
+    for a in swing.tolist():
+        prev = a if prev != prev else prev + ((a - prev + 180.0) % 360.0 - 180.0)
+        out.append(prev)
+    return out, prev
 
 
 class ReplayedDriver:

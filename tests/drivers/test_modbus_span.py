@@ -17,6 +17,7 @@ import pytest
 from drivers.base import Reading
 from drivers.capture.format import RegisterRead, read_capture
 from drivers.capture.replay import RecordedRegisters
+from drivers.modbus_adc.channels import Channel
 from drivers.modbus_adc.driver import ModbusAdcDriver
 from drivers.modbus_adc.span import ModbusSpanReader
 from shoveld.daemon.config import DeviceConfig, device_signals
@@ -108,22 +109,42 @@ def test_span_reads_match_per_tick_polls_when_the_module_fails(window: int) -> N
     assert a == b
 
 
-def test_a_value_that_is_no_number_goes_to_the_per_tick_poll() -> None:
-    """A decoder that gives NaN for one word: that poll drops the channel's value (it is
+def test_a_value_that_is_no_number_goes_to_the_per_tick_poll(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """A channel that decodes one word to NaN: that poll drops the channel's value (it is
     missing, not invalid, in the driver's reading); the span read leaves it to the poll."""
+    drv, port, _ = _setup("adc_incl", damage=False)
+    address, count, chans, decoders = drv._plan[0]
+    word = port.registers.recorded((drv.config.function_code, address, count))[300] \
+        .registers[decoders[0][1]]
+    target = chans[0].name
+    decode_words = Channel.decode_words
+
+    def nan_words(self: Channel, words: np.ndarray) -> np.ndarray:
+        out = decode_words(self, words)
+        return np.where(words == word, np.nan, out) if self.name == target else out
+    monkeypatch.setattr(Channel, "decode_words", nan_words)
     runs = []
     for window in (None, 500):
         drv, port, clock = _setup("adc_incl", damage=False)
         address, count, chans, decoders = drv._plan[0]
         name, offset, decode, h = decoders[0]
-        word = port.registers.recorded((drv.config.function_code, address, count))[300] \
-            .registers[offset]
-        drv._plan[0] = (address, count, chans, ((name, offset, lambda w, _d=decode, _x=word:
-                                                 math.nan if w == _x else _d(w), h),
+        drv._plan[0] = (address, count, chans, ((name, offset, lambda w, _d=decode:
+                                                 math.nan if w == word else _d(w), h),
                                                 *decoders[1:]))
         runs.append(_play(drv, port, clock, 1500, window))
     assert any("-" in r[2] for r in runs[0][0])
     assert runs[0] == runs[1]
+
+
+@pytest.mark.parametrize("channel", [
+    Channel("signed", 0), Channel("offset_binary", 0, 0, 65535, 0.0, 10.0, 400.0, -2000.0),
+    Channel("ints", 0, 0, 4095, 4, 20, 3, -7), Channel("odd", 0, -2048, 2047, -5.0, 5.0,
+                                                       0.1, 1e-3)])
+def test_columns_decode_as_the_channel_decodes(channel: Channel) -> None:
+    words = np.arange(65536)
+    want = [channel.word_decoder()(w) for w in words.tolist()]
+    assert channel.decode_words(words).tolist() == want
 
 
 def test_the_schedule_is_the_drivers_own() -> None:
