@@ -14,6 +14,7 @@ per-tick read takes over there.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -24,6 +25,8 @@ from drivers.base import DriverHealth, plain_copy
 from drivers.spanio import RecordedStream
 
 _LF = 0x0A
+_MAX_PARSED = 100_000
+"""Distinct lines remembered with their value (a laser's distances repeat)."""
 
 
 @dataclass
@@ -70,7 +73,7 @@ class Ar4000SpanReader:
         self.port = port
         self.period = period
         self.stream = RecordedStream(port)
-        self._parsed: dict[bytes, float | None] = {}
+        self._parsed: dict[bytes, float] = {}
 
     def usable(self) -> bool:
         """Whether a span read can start now (connected, nothing unread or queued, no
@@ -93,24 +96,15 @@ class Ar4000SpanReader:
         tk, ends = rel.t, rel.ends
         nl = np.flatnonzero(rel.data == _LF)  # each line's LF
         raw = rel.data.tobytes()
+        lines = raw.split(b"\n")[:-1]  # the complete ones (CR still on)
+        get = self._parsed.get
+        found = [get(x) for x in lines]
+        if None in found:
+            for i in [i for i, v in enumerate(found) if v is None]:
+                found[i] = self._parse(lines[i])
+        vals = np.array(found, dtype=float)
+        good = ~np.isnan(vals)
         starts = np.concatenate([[0], nl[:-1] + 1]) if len(nl) else nl
-        vals = np.empty(len(nl))
-        good = np.ones(len(nl), dtype=bool)
-        parsed, unit, limit = self._parsed, cfg.unit_m, sp.max_line
-        for i, (a, b) in enumerate(zip(starts.tolist(), nl.tolist(), strict=True)):
-            line = raw[a:b]
-            if line.endswith(b"\r"):
-                line = line[:-1]
-            if len(line) > limit:
-                good[i] = False
-                continue
-            v = parsed.get(line, False)
-            if v is False:
-                v = parsed[line] = parse_line(line, unit)
-            if v is None:
-                good[i] = False
-            else:
-                vals[i] = v
         bad = np.flatnonzero(~good)
         # bytes with nothing else in them: up to the first line that is not a reading
         clean_end = int(starts[bad[0]]) if len(bad) else len(rel.data)
@@ -119,7 +113,7 @@ class Ar4000SpanReader:
         done = np.searchsorted(nl + 1, ends, side="right")  # lines complete by each tick
         line_ends = np.concatenate([[0], nl + 1])  # after the held bytes' lines
         held = ends - line_ends[done]
-        over = np.flatnonzero(held > limit)
+        over = np.flatnonzero(held > sp.max_line)
         if len(over):
             nt = min(nt, int(over[0]))
         arrive = np.searchsorted(ends, nl + 1, side="left")  # tick index of each line
@@ -134,6 +128,17 @@ class Ar4000SpanReader:
         nlines = int(done[nt - 1])
         return self._commit(k0, nt, rel.chunks, ends, raw, nl, vals[:nlines],
                             arrive[:nlines], tk, last_good)
+
+    def _parse(self, line: bytes) -> float:
+        """What the driver makes of one line (CR still on): metres, or NaN for a line
+        that is not a reading (overlong, malformed), remembered."""
+        text = line[:-1] if line.endswith(b"\r") else line
+        v = None if len(text) > self.driver._splitter.max_line else parse_line(
+            text, self.driver.config.unit_m)
+        if len(self._parsed) >= _MAX_PARSED:
+            self._parsed.clear()  # noise must not grow memory
+        out = self._parsed[line] = math.nan if v is None else v
+        return out
 
     def _commit(self, k0: int, nt: int, chunks: np.ndarray, ends: np.ndarray, raw: bytes,
                 nl: np.ndarray, vals: np.ndarray, arrive: np.ndarray, tk: np.ndarray,

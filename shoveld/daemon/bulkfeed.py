@@ -174,11 +174,12 @@ class BulkFeed:
         """Ticks of ``[k0, k1)`` at which the service publishes health (its own rule)."""
         out = set()
         nxt, hp = self._next_health, self.health_period_s
-        for k in range(k0, k1):
-            t = self.tick_time(k)
-            if t >= nxt:
-                nxt = t + hp
-                out.add(k)
+        t = np.arange(k0, k1) * self.period  # tick_time of each
+        i = int(np.searchsorted(t, nxt, side="left"))  # the first tick at or after nxt
+        while i < len(t):
+            nxt = float(t[i]) + hp
+            out.add(k0 + i)
+            i = int(np.searchsorted(t, nxt, side="left"))
         self._next_health = nxt
         return out
 
@@ -248,16 +249,13 @@ class BulkFeed:
     def _take(self, tr: Track, got: DriverSpan, look: set[int], first: bool) -> None:
         """A span read's readings, connection, end and health into the device's track."""
         n, k0, period = got.ticks, got.k0, self.period
-        ticks = got.reading_ticks.tolist()
-        tr.tick.extend(ticks)
-        tr.t_host.extend([0.0 + k * period for k in ticks])
+        tr.tick.extend(got.reading_ticks.tolist())
+        tr.t_host.extend((got.reading_ticks * period).tolist())  # tick_time of each
         for key, col in zip(tr.keys, tr.cols, strict=True):
             col.extend(got.values[key].tolist())
         tr.connected.extend([True] * n)
-        t = (np.arange(k0, k0 + n) * period).tolist()
-        end_t = self.sync.end_t
-        tr.done.extend([ti >= end_t and ex for ti, ex in zip(t, got.exhausted.tolist(),
-                                                             strict=True)])
+        t = np.arange(k0, k0 + n) * period
+        tr.done.extend(((t >= self.sync.end_t) & got.exhausted).tolist())
         marks = sorted(k for k in look if k0 <= k < k0 + n)
         if first:
             marks = sorted({k0, *marks})
@@ -404,8 +402,8 @@ class BulkFeed:
         for b in np.unique(bad).tolist():
             if b:
                 sets[b] = frozenset(sg for i, sg in enumerate(SIGNAL_FIELDS) if b >> i & 1)
-        return [Sample(*r, invalid=sets[b]) for r, b in zip(rows.tolist(), bad.tolist(),
-                                                            strict=True)]
+        # Sample called through map over the columns: no argument list built per row
+        return list(map(Sample, *rows.T.tolist(), map(sets.__getitem__, bad.tolist())))
 
 
 def unwrapped_swing(inst: Installation, yaw: np.ndarray, prev: float
