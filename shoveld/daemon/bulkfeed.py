@@ -45,7 +45,7 @@ _EMPTY: frozenset[str] = frozenset()
 SpanReader = MtiSpanReader | Ar4000SpanReader | ModbusSpanReader
 """A driver's reads of a run of ticks at once (``read(k0, k1)``; None where it cannot)."""
 DriverSpan = SpanRead | LineSpan | PollSpan
-_SPAN_READ_TICKS = 1000
+_SPAN_READ_TICKS = 3000
 """Ticks a span read takes on at most (its buffers stay small; its cost is per call)."""
 _RETRY_MAX_TICKS = 64
 """The longest wait, in ticks, before trying a span read again after one could not start."""
