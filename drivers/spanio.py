@@ -30,8 +30,9 @@ class Released:
 
 
 class RecordedStream:
-    """A port's recorded ``(time, bytes)`` chunks as arrays; ``port`` has ``stream``
-    and ``position`` (chunks released so far), as the fast replay's in-memory port."""
+    """A port's recorded chunks as arrays; ``port`` has ``recording()`` (the chunks'
+    times and bytes) and ``position`` (chunks released so far), as the fast replay's
+    in-memory port."""
 
     def __init__(self, port: Any) -> None:
         self.port = port
@@ -39,14 +40,14 @@ class RecordedStream:
 
     def _prepare(self) -> None:
         """The recording as arrays (again if it changed since)."""
-        stream = self.port.stream
-        if len(stream) == self._n:
+        times, chunks = self.port.recording()
+        if len(times) == self._n:
             return
-        self.times = np.array([c[0] for c in stream], dtype=float)
-        lens = np.array([len(c[1]) for c in stream], dtype=np.int64)
+        self.times = np.array(times, dtype=float)
+        lens = np.fromiter(map(len, chunks), dtype=np.int64, count=len(chunks))
         self.offsets = np.concatenate([[0], np.cumsum(lens)])
-        self.data = np.frombuffer(b"".join(c[1] for c in stream), dtype=np.uint8)
-        self._n = len(stream)
+        self.data = np.frombuffer(b"".join(chunks), dtype=np.uint8)
+        self._n = len(times)
 
     @property
     def chunk_count(self) -> int:

@@ -239,7 +239,9 @@ class MtiSpanReader:
         port.advance(int(j[nt - 1]))
         vals = (e[:, 0], e[:, 1], e[:, 2], g[:, 0], g[:, 1], g[:, 2], acc[:, 0], acc[:, 1],
                 acc[:, 2], pc.astype(float), stf.astype(float), sw.astype(float))
-        values = {k: v[:nf][em] for k, v in zip(VALUE_KEYS, vals, strict=True)}
+        every = len(em) == nf  # the usual case: views, no copies
+        values = {k: v[:nf] if every else v[:nf][em]
+                  for k, v in zip(VALUE_KEYS, vals, strict=True)}
         return SpanRead(k0, nt, k0 + em_tick, values, j[:nt] >= self.stream.chunk_count, base,
                         cum)
 

@@ -82,6 +82,10 @@ class MemorySerial:
             self._buf += self._chunks[i] if j == i + 1 else b"".join(self._chunks[i:j])
             self._i = j
 
+    def recording(self) -> tuple[list[float], list[bytes]]:
+        """The recorded chunks' times and bytes (the lists ``release`` reads)."""
+        return self._times, self._chunks
+
     @property
     def position(self) -> int:
         """Recorded chunks released so far."""
