@@ -399,11 +399,12 @@ class BulkFeed:
     def _samples(rows: np.ndarray, bad: np.ndarray) -> list[Sample]:
         """Sample objects of the rows; one frozenset per distinct invalid pattern."""
         sets: dict[int, frozenset[str]] = {0: _EMPTY}
-        for b in np.unique(bad).tolist():
+        bits = bad.tolist()
+        for b in set(bits):  # not np.unique: its first call imports numpy.ma (10 ms)
             if b:
                 sets[b] = frozenset(sg for i, sg in enumerate(SIGNAL_FIELDS) if b >> i & 1)
         # Sample called through map over the columns: no argument list built per row
-        return list(map(Sample, *rows.T.tolist(), map(sets.__getitem__, bad.tolist())))
+        return list(map(Sample, *rows.T.tolist(), map(sets.__getitem__, bits)))
 
 
 def unwrapped_swing(inst: Installation, yaw: np.ndarray, prev: float
