@@ -176,19 +176,22 @@ def test_span_reads_of_the_undamaged_capture_read_nearly_everything() -> None:
     assert drv.health.messages > 1900
 
 
-def _synthetic(precision: str) -> tuple[MtiSerialDriver, MemorySerial, StepClock]:
+def _synthetic(precision: str, extended: bool = False
+               ) -> tuple[MtiSerialDriver, MemorySerial, StepClock]:
     """A measuring MTi with Euler angles and quaternion in one packet, its stream made by
-    the emulator (two chunks per frame, sometimes two frames per chunk)."""
+    the emulator (two chunks per frame, sometimes two frames per chunk; ``extended``:
+    every frame with the extended length header, which the parser accepts too)."""
     clock = StepClock()
     drv = MtiSerialDriver(name="mti", orientation="euler+quaternion", precision=precision,
                           baudrate=921600, clock=clock, timeout_clock=clock)
     emu = MtiEmulator(lambda t: (5 * math.sin(t), 30 * math.cos(t / 3), (70 * t) % 360 - 180),
                       outputs=tuple(drv.requested_outputs()))
     try:
-        frames = b"".join(encode_frame(MID.MTDATA2, emu.packet(k)) for k in range(1500))
+        frames = b"".join(encode_frame(MID.MTDATA2, emu.packet(k), extended=extended)
+                          for k in range(1500))
     finally:
         shutil.rmtree(emu.link.parent, ignore_errors=True)
-    data = damage(bytearray(frames), _frames(frames)[400:500], _layout_of(frames))
+    data = damage(bytearray(frames), _frames(frames)[400:500], _layout_of(frames, extended))
     stream, pos, k = [], 0, 0
     for f in [*_frames(data), len(data)]:
         if f > pos:
@@ -202,15 +205,18 @@ def _synthetic(precision: str) -> tuple[MtiSerialDriver, MemorySerial, StepClock
     return drv, port, clock
 
 
-def _layout_of(frames: bytes) -> FrameLayout:
+def _layout_of(frames: bytes, extended: bool = False) -> FrameLayout:
     fs = _frames(frames)
-    return FrameLayout(np.frombuffer(frames[fs[0]:fs[1]], np.uint8), 4)
+    return FrameLayout(np.frombuffer(frames[fs[0]:fs[1]], np.uint8), 6 if extended else 4)
 
 
-@pytest.mark.parametrize("precision", ["float32", "fp1632", "fp1220", "float64"])
-def test_span_reads_match_per_tick_reads_with_the_quaternion(precision: str) -> None:
-    a = _play(*_synthetic(precision), 1400, None)
-    b = _play(*_synthetic(precision), 1400, 64)
+@pytest.mark.parametrize(("precision", "extended"), [
+    ("float32", False), ("fp1632", False), ("fp1220", False), ("float64", False),
+    ("float32", True)])
+def test_span_reads_match_per_tick_reads_with_the_quaternion(precision: str,
+                                                             extended: bool) -> None:
+    a = _play(*_synthetic(precision, extended), 1400, None)
+    b = _play(*_synthetic(precision, extended), 1400, 64)
     h = a[1][-1]
     assert h["inconsistent_frames"] >= 2 and h["bad_frames"] >= 6
     assert len(a[0]) > 1300
