@@ -25,6 +25,7 @@ from drivers.base import DriverHealth, plain_copy
 from drivers.spanio import RecordedStream
 
 _LF = 0x0A
+_CR = 0x0D
 _MAX_PARSED = 100_000
 """Distinct lines remembered with their value (a laser's distances repeat)."""
 
@@ -63,6 +64,25 @@ class LineSpan:
         return h
 
 
+def digit_lines(data: np.ndarray, starts: np.ndarray, lf: np.ndarray, unit_m: float
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """The lines ``data[starts:lf]`` that are 1 to 7 digits (after the splitter drops
+    one CR), and their value as :func:`parse_line` gives it (``float(int) * unit_m``,
+    exact in float64; 0 is :data:`NO_TARGET`, 0.0 too); NaN for the other lines."""
+    cr = (lf > starts) & (data[np.maximum(lf - 1, 0)] == _CR)
+    stop = lf - cr
+    length = stop - starts
+    digit = ((data >= 0x30) & (data <= 0x39)).astype(np.int64)
+    count = np.concatenate([[0], np.cumsum(digit)])
+    plain = (length >= 1) & (length <= 7) & (count[stop] - count[starts] == length)
+    # the last 7 bytes of each line, by place value; bytes before the line count 0
+    at = stop[:, None] - 7 + np.arange(7)
+    d = np.where(at >= starts[:, None], data[np.maximum(at, 0)].astype(np.int64) - 0x30, 0)
+    ints = d @ (10 ** np.arange(6, -1, -1, dtype=np.int64))
+    vals = np.where(plain, ints.astype(float) * unit_m, np.nan)
+    return plain, vals
+
+
 class Ar4000SpanReader:
     """An :class:`Ar4000Driver` read tick after tick from an in-memory recording
     (``port`` as for :class:`~drivers.spanio.RecordedStream`, with ``in_waiting`` and
@@ -96,15 +116,16 @@ class Ar4000SpanReader:
         tk, ends = rel.t, rel.ends
         nl = np.flatnonzero(rel.data == _LF)  # each line's LF
         raw = rel.data.tobytes()
-        lines = raw.split(b"\n")[:-1]  # the complete ones (CR still on)
-        get = self._parsed.get
-        found = [get(x) for x in lines]
-        if None in found:
-            for i in [i for i, v in enumerate(found) if v is None]:
-                found[i] = self._parse(lines[i])
-        vals = np.array(found, dtype=float)
-        good = ~np.isnan(vals)
         starts = np.concatenate([[0], nl[:-1] + 1]) if len(nl) else nl
+        plain, vals = digit_lines(rel.data, starts, nl, cfg.unit_m)
+        other = np.flatnonzero(~plain).tolist()
+        if other:  # the rest through parse_line, each distinct line once
+            lines = raw.split(b"\n")
+            get = self._parsed.get
+            for i in other:
+                v = get(lines[i])
+                vals[i] = self._parse(lines[i]) if v is None else v
+        good = ~np.isnan(vals)
         bad = np.flatnonzero(~good)
         # bytes with nothing else in them: up to the first line that is not a reading
         clean_end = int(starts[bad[0]]) if len(bad) else len(rel.data)

@@ -10,10 +10,11 @@ import math
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
-from drivers.acuity.ar4000 import DISTANCE, Ar4000Driver
-from drivers.acuity.span import Ar4000SpanReader
+from drivers.acuity.ar4000 import DISTANCE, Ar4000Driver, parse_line
+from drivers.acuity.span import Ar4000SpanReader, digit_lines
 from drivers.base import Reading
 from drivers.capture.format import read_capture
 from shoveld.daemon.config import DeviceConfig, device_signals
@@ -115,3 +116,25 @@ def test_span_reads_match_per_tick_reads_on_a_damaged_line(window: int) -> None:
     assert h["timeouts"] == 1 and h["reconnects"] == 1
     assert any(x["babbling"] for x in a[1])
     assert a == b
+
+
+def test_digit_lines_are_valued_as_parse_line_values_them() -> None:
+    """Lines of 1 to 7 digits by numpy, the others left to parse_line: the same values."""
+    rng = np.random.default_rng(5)
+    lines = [b"0", b"0000000", b"7", b"1234567", b"12345678", b"", b"\r", b"12\r\r",
+             b" 12", b"-12", b"1.5", b"12a", b"\x0012"]
+    for _ in range(3000):
+        n = int(rng.integers(1, 9))
+        lines.append("".join(map(str, rng.integers(0, 10, n))).encode()
+                     + (b"\r" if rng.random() < 0.7 else b""))
+    data = b"".join(x + b"\n" for x in lines)
+    arr = np.frombuffer(data, np.uint8)
+    lf = np.flatnonzero(arr == 0x0A)
+    starts = np.concatenate([[0], lf[:-1] + 1])
+    for unit in (0.001, 0.0254):
+        plain, vals = digit_lines(arr, starts, lf, unit)
+        for x, p, v in zip(lines, plain.tolist(), vals.tolist(), strict=True):
+            text = x[:-1] if x.endswith(b"\r") else x
+            assert p == (text.isdigit() and 1 <= len(text) <= 7 and text.isascii())
+            if p:
+                assert v == parse_line(text, unit)
