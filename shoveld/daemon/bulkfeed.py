@@ -5,6 +5,9 @@ store and the assembler inside every 10 ms tick. Nothing a driver does there dep
 on another device or on the engine, so here each device's driver runs alone over a
 span of ticks (:class:`~shoveld.daemon.syncreplay.SyncDevice`, the same stepping,
 handshakes, parsers and health rules), and its readings are kept with their ticks.
+Where nothing but the usual can happen, a driver's span reader does the work of many
+of its per-tick reads at once on the recording as numpy arrays (the MTi's frames, the
+laser's lines, the ADC's polls; ``drivers/*/span.py``, ``drivers/xsens/serial_span.py``).
 The samples of the whole span are then built at once with numpy by the assembler's
 rules (:meth:`BulkFeed._assemble`), and the loop only hands each one to the engine
 (:class:`BulkAssembler` stands in for the service's assembler).
@@ -185,36 +188,12 @@ class BulkFeed:
 
     def _run_device(self, name: str, k0: int, k1: int, look: set[int]) -> None:
         """Step one driver over ticks ``[k0, k1)``, alone (no other device's driver nor
-        the engine runs in between: none depends on them)."""
+        the engine runs in between: none depends on them). A driver with a span reader
+        reads runs of ticks at once wherever that does the per-tick reads' work, and
+        steps tick by tick elsewhere (handshakes, resynchronising on noise, timeouts)
+        and for a while after a span read could not start, so that a damaged stretch
+        does not cost an attempt per tick."""
         reader = self._readers.get(name)
-        if reader is not None:
-            self._run_spans(name, reader, k0, k1, look)
-            return
-        sd, tr = self._devs[name], self.tracks[name]
-        transport, health = sd.transport, sd.driver.health
-        clock, at, step = self.sync.clock, self._at, sd.step
-        conn, done = tr.connected.append, tr.done.append
-        end_t, period = self.sync.end_t, self.period
-        prev: bool | None = None
-        for k in range(k0, k1):
-            t = 0.0 + k * period  # = self.tick_time(k), inline: once per tick and device
-            clock.t = t
-            at[0] = k
-            step(t)
-            c = health.connected
-            conn(c)
-            if c is not prev or k in look:
-                tr.health[k] = health.snapshot()
-                prev = c
-            done(t >= end_t and getattr(transport, "exhausted", True)
-                 and not transport.in_waiting)
-
-    def _run_spans(self, name: str, reader: SpanReader, k0: int, k1: int,
-                   look: set[int]) -> None:
-        """Like :meth:`_run_device`, with the driver's span reads wherever they can do the
-        per-tick reads' work; the driver steps tick by tick elsewhere (handshakes,
-        resynchronising on noise, timeouts) and for a while after a span read could not
-        start, so a damaged stretch does not cost an attempt per tick."""
         sd, tr = self._devs[name], self.tracks[name]
         transport, health = sd.transport, sd.driver.health
         clock, at, step = self.sync.clock, self._at, sd.step
@@ -223,7 +202,7 @@ class BulkFeed:
         prev: bool | None = None
         k, retry = k0, self._retry.get(name, (k0, 1))
         while k < k1:
-            if health.connected and k >= retry[0]:
+            if reader is not None and health.connected and k >= retry[0]:
                 got = reader.read(k, min(k1, k + _SPAN_READ_TICKS))
                 if got is not None:
                     self._take(tr, got, look, first=prev is not True)
@@ -232,7 +211,7 @@ class BulkFeed:
                     clock.t, at[0] = 0.0 + (k - 1) * period, k - 1
                     continue
                 retry = (k + retry[1], min(2 * retry[1], _RETRY_MAX_TICKS))
-            t = 0.0 + k * period
+            t = 0.0 + k * period  # = self.tick_time(k), inline: once per tick and device
             clock.t = t
             at[0] = k
             step(t)
