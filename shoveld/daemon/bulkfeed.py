@@ -231,7 +231,8 @@ class BulkFeed:
         tr.tick.extend(got.reading_ticks.tolist())
         tr.t_host.extend((got.reading_ticks * period).tolist())  # tick_time of each
         for key, col in zip(tr.keys, tr.cols, strict=True):
-            col.extend(got.values[key].tolist())
+            v = got.values.get(key)  # a quantity the driver does not read: NaN, as the sink
+            col.extend(v.tolist() if v is not None else [math.nan] * len(got.reading_ticks))
         tr.connected.extend([True] * n)
         t = np.arange(k0, k0 + n) * period
         tr.done.extend(((t >= self.sync.end_t) & got.exhausted).tolist())
