@@ -1,9 +1,10 @@
 """Replay speed of the daemon on the committed capture, as a multiple of real time.
 
 * ``fast``: ``shoveld replay --fast`` in-process - the bulk front end (each device's
-  driver on its in-memory transport, alone over a span of ticks; the span's samples
-  built with numpy), then the loop: engine, pass log, Zenoh. The breakdown splits the
-  time per 10 ms tick into the front end (per device, and the assembly) and the loop
+  driver on its in-memory transport, alone over a span of ticks, with its span reads;
+  the span's samples built with numpy), then the loop: engine, pass log, Zenoh. The
+  breakdown splits the time per 10 ms tick into the front end (per device: its steps
+  and span reads with their bookkeeping; and the assembly) and the loop
   (engine, and the rest: service, events, health); ``loop only`` is the speed of the
   loop without the front end;
 * ``per-tick``: the same with the drivers, store and assembler inside every tick
