@@ -1,9 +1,10 @@
 """Replay speed of the daemon on the committed capture, as a multiple of real time.
 
 * ``fast``: ``shoveld replay --fast`` in-process - the bulk front end (each device's
-  driver on its in-memory transport, alone over a span of ticks; the span's samples
-  built with numpy), then the loop: engine, pass log, Zenoh. The breakdown splits the
-  time per 10 ms tick into the front end (per device, and the assembly) and the loop
+  driver on its in-memory transport, alone over a span of ticks, with its span reads;
+  the span's samples built with numpy), then the loop: engine, pass log, Zenoh. The
+  breakdown splits the time per 10 ms tick into the front end (per device: its steps
+  and span reads with their bookkeeping; and the assembly) and the loop
   (engine, and the rest: service, events, health); ``loop only`` is the speed of the
   loop without the front end;
 * ``per-tick``: the same with the drivers, store and assembler inside every tick
@@ -99,9 +100,7 @@ def run_once(stepped: bool, breakdown: bool, subscriber: bool = False, bulk: boo
                 svc.publisher.put = timed(acc, "zenoh put", svc.publisher.put)
                 if bulk:
                     feed = svc.assembler.feed  # type: ignore[attr-defined]
-                    for name in list(feed.devices):
-                        feed._devs[name].step = timed(acc, f"  driver {name}",
-                                                      feed._devs[name].step)
+                    feed._run_device = timed_by_device(acc, feed._run_device)
                     feed._assemble = timed(acc, "  assembly (numpy)", feed._assemble)
                     feed.spans = timed_spans(acc, "front end (drivers, assembly)", feed.spans)
                     svc.assembler._spans = feed.spans()  # type: ignore[attr-defined]
@@ -128,6 +127,14 @@ def run_once(stepped: bool, breakdown: bool, subscriber: bool = False, bulk: boo
         if front is not None:
             fig["loop_only_speed_x"] = round(fig["capture_s"] / (total - front), 1)
     return fig
+
+
+def timed_by_device(acc: dict[str, float], run: Callable[..., Any]) -> Callable[..., Any]:
+    """``BulkFeed._run_device`` (a device's ticks of a span: its per-tick steps and
+    span reads) with the time counted per device."""
+    def wrapper(name: str, *a: Any) -> Any:
+        return timed(acc, f"  driver {name}", run)(name, *a)
+    return wrapper
 
 
 def timed_spans(acc: dict[str, float], name: str, spans: Callable[[], Any]

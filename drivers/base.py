@@ -9,6 +9,7 @@ recovered and reported rather than fatal.
 
 from __future__ import annotations
 
+import copy
 import logging
 import math
 import threading
@@ -77,6 +78,29 @@ class DriverHealth:
             d["age_s"] = now - self.last_reading_t
         d.update(self.extra)
         return d
+
+    def snapshot(self) -> DriverHealth:
+        """A copy that later changes to this one do not reach (``extra`` included)."""
+        return DriverHealth(self.connected, self.messages, self.bad_frames,
+                            self.rejected_bytes, self.timeouts, self.reconnects,
+                            self.last_reading_t, self.last_error, plain_copy(self.extra))
+
+
+_SCALARS = (str, int, float, bool, type(None))
+
+
+def plain_copy(x: Any) -> Any:
+    """A deep copy of health data (dicts, lists and scalars; anything else by
+    ``copy.deepcopy``): replays copy health at every health tick, and deepcopy's
+    generality costs about ten times as much."""
+    t = type(x)
+    if t is dict:
+        return {k: plain_copy(v) for k, v in x.items()}
+    if t is list:
+        return [plain_copy(v) for v in x]
+    if t in _SCALARS:
+        return x
+    return copy.deepcopy(x)
 
 
 class DeviceError(RuntimeError):

@@ -350,6 +350,12 @@ class RecordedRegisters:
         i = bisect.bisect_right(ts, t) - 1
         return rs[i] if i >= 0 else self.NOT_YET
 
+    def recorded(self, key: tuple[int, int, int]) -> list[RegisterRead] | None:
+        """The recorded reads of block ``(function, address, count)`` in time order (None:
+        that block was never read as such), for readers that answer many polls at once."""
+        entry = self._by_block.get(key)
+        return None if entry is None else list(entry[1])
+
     NOT_YET = 6
     """Answer before the first recorded read: DEVICE_BUSY, an honest "no value yet"
     that still counts as an answer (no reconnect storm at the start of a replay)."""

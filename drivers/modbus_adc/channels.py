@@ -22,6 +22,8 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from drivers.base import check_keys
 
 #: Signals-table columns an ADC channel may feed.
@@ -81,6 +83,17 @@ class Channel:
             raw = word - 0x10000 if signed and word >= 0x8000 else word
             return (vmin + (raw - rmin) * vspan / rspan) * scale + offset
         return decode
+
+    def decode_words(self, words: np.ndarray) -> np.ndarray:
+        """:meth:`word_decoder` on an array of words, for replays that decode many polls
+        at once: the same operations in the same order on the same types (integers
+        below 2**53 convert exactly), so the same values to the last bit."""
+        vmin, rmin = self.volts_min, self.raw_min
+        vspan, rspan = self.volts_max - self.volts_min, self.raw_max - self.raw_min
+        w = np.asarray(words, dtype=np.int64)
+        raw = np.where(w >= 0x8000, w - 0x10000, w) if self.signed else w
+        out = (vmin + (raw - rmin) * vspan / rspan) * self.scale + self.offset
+        return np.asarray(out, dtype=float)
 
     def from_word(self, word: int) -> float:
         return self.from_raw(self.word_to_raw(word))

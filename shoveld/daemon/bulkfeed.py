@@ -5,6 +5,9 @@ store and the assembler inside every 10 ms tick. Nothing a driver does there dep
 on another device or on the engine, so here each device's driver runs alone over a
 span of ticks (:class:`~shoveld.daemon.syncreplay.SyncDevice`, the same stepping,
 handshakes, parsers and health rules), and its readings are kept with their ticks.
+Where nothing but the usual can happen, a driver's span reader does the work of many
+of its per-tick reads at once on the recording as numpy arrays (the MTi's frames, the
+laser's lines, the ADC's polls; ``drivers/*/span.py``, ``drivers/xsens/serial_span.py``).
 The samples of the whole span are then built at once with numpy by the assembler's
 rules (:meth:`BulkFeed._assemble`), and the loop only hands each one to the engine
 (:class:`BulkAssembler` stands in for the service's assembler).
@@ -16,7 +19,6 @@ gives what the stepped path gives on every committed capture.
 
 from __future__ import annotations
 
-import copy
 import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -24,12 +26,18 @@ from typing import Any
 
 import numpy as np
 
+from drivers.acuity.ar4000 import Ar4000Driver
+from drivers.acuity.span import Ar4000SpanReader, LineSpan
 from drivers.base import DriverHealth, Reading
+from drivers.modbus_adc.driver import ModbusAdcDriver
+from drivers.modbus_adc.span import ModbusSpanReader, PollSpan
+from drivers.xsens.serial_driver import MtiSerialDriver
+from drivers.xsens.serial_span import MtiSpanReader, SpanRead
 from shoveld.daemon.assemble import DeviceState
 from shoveld.daemon.config import LASER_KINDS, MTI_KINDS, DeviceConfig
 from shoveld.daemon.store import ReadingStore
-from shoveld.daemon.syncreplay import SyncDevice, SyncReplay
-from shoveld.installation import Installation, unwrap_deg
+from shoveld.daemon.syncreplay import MemoryModbus, MemorySerial, SyncDevice, SyncReplay
+from shoveld.installation import Installation
 from shoveld.sample import SIGNAL_FIELDS, Sample
 from shoveld.signals.columns import BY_NAME
 
@@ -37,6 +45,13 @@ _COL = {name: i for i, name in enumerate(SIGNAL_FIELDS)}
 _BIT = {name: 1 << i for i, name in enumerate(SIGNAL_FIELDS)}
 """A bit per signal, for a tick's invalid set as one integer."""
 _EMPTY: frozenset[str] = frozenset()
+SpanReader = MtiSpanReader | Ar4000SpanReader | ModbusSpanReader
+"""A driver's reads of a run of ticks at once (``read(k0, k1)``; None where it cannot)."""
+DriverSpan = SpanRead | LineSpan | PollSpan
+_SPAN_READ_TICKS = 3000
+"""Ticks a span read takes on at most (its buffers stay small; its cost is per call)."""
+_RETRY_MAX_TICKS = 64
+"""The longest wait, in ticks, before trying a span read again after one could not start."""
 OK, INVALID, STALE, DISCONNECTED, NO_DATA = range(5)
 STATES = ("ok", "invalid", "stale", "disconnected", "no_data")
 """Device states as the assembler names them (:class:`DeviceState`)."""
@@ -113,11 +128,6 @@ class Span:
     state, readings so far)."""
 
 
-def _health_copy(h: DriverHealth) -> DriverHealth:
-    return DriverHealth(h.connected, h.messages, h.bad_frames, h.rejected_bytes, h.timeouts,
-                        h.reconnects, h.last_reading_t, h.last_error, copy.deepcopy(h.extra))
-
-
 class BulkFeed:
     """Samples of a capture for the service's ticks, built a span at a time."""
 
@@ -139,6 +149,19 @@ class BulkFeed:
             self.tracks[name] = tr
             self._devs[name] = SyncDevice(name, sync.drivers[name], sync.transports[name],
                                           tr.sink(self._at), sync.clock)
+        self._readers: dict[str, SpanReader] = {}
+        """Devices whose driver reads a run of ticks at once (:mod:`drivers.xsens.serial_span`)."""
+        self._retry: dict[str, tuple[int, int]] = {}
+        """Per device with a span reader: (first tick to try one again, ticks to wait after
+        the next failure)."""
+        for name in self.devices:
+            drv, port = sync.drivers[name], sync.transports[name]
+            if isinstance(drv, MtiSerialDriver) and isinstance(port, MemorySerial):
+                self._readers[name] = MtiSpanReader(drv, port, self.period)
+            elif isinstance(drv, Ar4000Driver) and isinstance(port, MemorySerial):
+                self._readers[name] = Ar4000SpanReader(drv, port, self.period)
+            elif isinstance(drv, ModbusAdcDriver) and isinstance(port, MemoryModbus):
+                self._readers[name] = ModbusSpanReader(drv, port, port.registers, self.period)
         self._swing_prev = math.nan
         self._next_health = -math.inf
         self.ticks = 0
@@ -154,24 +177,40 @@ class BulkFeed:
         """Ticks of ``[k0, k1)`` at which the service publishes health (its own rule)."""
         out = set()
         nxt, hp = self._next_health, self.health_period_s
-        for k in range(k0, k1):
-            t = self.tick_time(k)
-            if t >= nxt:
-                nxt = t + hp
-                out.add(k)
+        t = np.arange(k0, k1) * self.period  # tick_time of each
+        i = int(np.searchsorted(t, nxt, side="left"))  # the first tick at or after nxt
+        while i < len(t):
+            nxt = float(t[i]) + hp
+            out.add(k0 + i)
+            i = int(np.searchsorted(t, nxt, side="left"))
         self._next_health = nxt
         return out
 
     def _run_device(self, name: str, k0: int, k1: int, look: set[int]) -> None:
         """Step one driver over ticks ``[k0, k1)``, alone (no other device's driver nor
-        the engine runs in between: none depends on them)."""
+        the engine runs in between: none depends on them). A driver with a span reader
+        reads runs of ticks at once wherever that does the per-tick reads' work, and
+        steps tick by tick elsewhere (handshakes, resynchronising on noise, timeouts)
+        and for a while after a span read could not start, so that a damaged stretch
+        does not cost an attempt per tick."""
+        reader = self._readers.get(name)
         sd, tr = self._devs[name], self.tracks[name]
         transport, health = sd.transport, sd.driver.health
         clock, at, step = self.sync.clock, self._at, sd.step
         conn, done = tr.connected.append, tr.done.append
         end_t, period = self.sync.end_t, self.period
         prev: bool | None = None
-        for k in range(k0, k1):
+        k, retry = k0, self._retry.get(name, (k0, 1))
+        while k < k1:
+            if reader is not None and health.connected and k >= retry[0]:
+                got = reader.read(k, min(k1, k + _SPAN_READ_TICKS))
+                if got is not None:
+                    self._take(tr, got, look, first=prev is not True)
+                    prev, retry = True, (k, 1)
+                    k += got.ticks
+                    clock.t, at[0] = 0.0 + (k - 1) * period, k - 1
+                    continue
+                retry = (k + retry[1], min(2 * retry[1], _RETRY_MAX_TICKS))
             t = 0.0 + k * period  # = self.tick_time(k), inline: once per tick and device
             clock.t = t
             at[0] = k
@@ -179,10 +218,29 @@ class BulkFeed:
             c = health.connected
             conn(c)
             if c is not prev or k in look:
-                tr.health[k] = _health_copy(health)
+                tr.health[k] = health.snapshot()
                 prev = c
             done(t >= end_t and getattr(transport, "exhausted", True)
                  and not transport.in_waiting)
+            k += 1
+        self._retry[name] = retry
+
+    def _take(self, tr: Track, got: DriverSpan, look: set[int], first: bool) -> None:
+        """A span read's readings, connection, end and health into the device's track."""
+        n, k0, period = got.ticks, got.k0, self.period
+        tr.tick.extend(got.reading_ticks.tolist())
+        tr.t_host.extend((got.reading_ticks * period).tolist())  # tick_time of each
+        for key, col in zip(tr.keys, tr.cols, strict=True):
+            v = got.values.get(key)  # a quantity the driver does not read: NaN, as the sink
+            col.extend(v.tolist() if v is not None else [math.nan] * len(got.reading_ticks))
+        tr.connected.extend([True] * n)
+        t = np.arange(k0, k0 + n) * period
+        tr.done.extend(((t >= self.sync.end_t) & got.exhausted).tolist())
+        marks = sorted(k for k in look if k0 <= k < k0 + n)
+        if first:
+            marks = sorted({k0, *marks})
+        for k in marks:
+            tr.health[k] = got.health_after(k - k0)
 
     def _first_tick_at(self, t: float) -> int:
         """Index of the first tick at or after capture time ``t``."""
@@ -300,12 +358,8 @@ class BulkFeed:
             sig_bad[live & yaw_bad] |= _BIT["swing_deg"]
             # the unwrapped swing carries state from tick to tick, as in the assembler
             at = np.flatnonzero(live & ~yaw_bad)
-            prev, swing, out = self._swing_prev, inst.swing_deg, []
-            for y in yaw[at].tolist():
-                prev = unwrap_deg(prev, swing(y))
-                out.append(prev)
+            out, self._swing_prev = unwrapped_swing(inst, yaw[at], self._swing_prev)
             rows[at, _COL["swing_deg"]] = out
-            self._swing_prev = prev
         elif dev.kind in LASER_KINDS:
             (v,) = cols
             crowd = inst.crowd_m(v)  # NaN stays NaN
@@ -325,11 +379,27 @@ class BulkFeed:
     def _samples(rows: np.ndarray, bad: np.ndarray) -> list[Sample]:
         """Sample objects of the rows; one frozenset per distinct invalid pattern."""
         sets: dict[int, frozenset[str]] = {0: _EMPTY}
-        for b in np.unique(bad).tolist():
+        bits = bad.tolist()
+        for b in set(bits):  # not np.unique: its first call imports numpy.ma (10 ms)
             if b:
                 sets[b] = frozenset(sg for i, sg in enumerate(SIGNAL_FIELDS) if b >> i & 1)
-        return [Sample(*r, invalid=sets[b]) for r, b in zip(rows.tolist(), bad.tolist(),
-                                                            strict=True)]
+        # Sample called through map over the columns: no argument list built per row
+        return list(map(Sample, *rows.T.tolist(), map(sets.__getitem__, bits)))
+
+
+def unwrapped_swing(inst: Installation, yaw: np.ndarray, prev: float
+                    ) -> tuple[list[float], float]:
+    """Swing angles of MTi yaws, each continued from the one before (the first from
+    ``prev``), and the last: ``unwrap_deg(prev, inst.swing_deg(y))`` in turn, with their
+    operations in their order (numpy's remainder is Python's float %), the swing of
+    the whole column at once and the unwrapping inlined."""
+    swing = inst.swing_yaw_sign * (np.remainder(yaw - inst.swing_yaw_zero_deg + 180.0,
+                                                360.0) - 180.0)
+    out = []
+    for a in swing.tolist():
+        prev = a if prev != prev else prev + ((a - prev + 180.0) % 360.0 - 180.0)
+        out.append(prev)
+    return out, prev
 
 
 class ReplayedDriver:

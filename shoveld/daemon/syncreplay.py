@@ -82,6 +82,19 @@ class MemorySerial:
             self._buf += self._chunks[i] if j == i + 1 else b"".join(self._chunks[i:j])
             self._i = j
 
+    def recording(self) -> tuple[list[float], list[bytes]]:
+        """The recorded chunks' times and bytes (the lists ``release`` reads)."""
+        return self._times, self._chunks
+
+    @property
+    def position(self) -> int:
+        """Recorded chunks released so far."""
+        return self._i
+
+    def advance(self, j: int) -> None:
+        """Count the chunks before ``j`` as released and read (a span reader took them)."""
+        self._i = j
+
     @property
     def exhausted(self) -> bool:
         return self._i >= len(self.stream)

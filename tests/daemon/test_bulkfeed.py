@@ -15,11 +15,14 @@ import threading
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 from hil_fixtures.regress import captures
+from shoveld.daemon.bulkfeed import unwrapped_swing
 from shoveld.daemon.config import parse_config
 from shoveld.daemon.replay import fast_replay_service
+from shoveld.installation import Installation, unwrap_deg
 from shoveld.model.params import load_params
 from shoveld.sample import Sample
 
@@ -144,3 +147,17 @@ def test_a_silent_mti_times_out_in_capture_time_alike(tmp_path: Path) -> None:
     assert mti["timeouts"] >= 1 and mti["reconnects"] >= 1 and mti["connected"]
     assert [_row(s) for s in bulk["samples"]] == [_row(s) for s in stepped["samples"]]
     assert bulk["health"] == stepped["health"]
+
+
+def test_the_swing_is_unwrapped_as_the_assembler_does() -> None:
+    """Through the +-180 wrap both ways, in big and small steps, from a NaN start."""
+    rng = np.random.default_rng(3)
+    yaw = np.remainder(np.cumsum(rng.normal(0, 40, 5000)) + 180.0, 360.0) - 180.0
+    yaw[::17] = rng.uniform(-180, 180, len(yaw[::17]))
+    for inst in (Installation(), Installation(swing_yaw_zero_deg=137.25, swing_yaw_sign=-1.0)):
+        prev, want = math.nan, []
+        for y in yaw.tolist():
+            prev = unwrap_deg(prev, inst.swing_deg(y))
+            want.append(prev)
+        got, last = unwrapped_swing(inst, yaw, math.nan)
+        assert got == want and last == want[-1]

@@ -1,0 +1,253 @@
+"""The MTi serial driver's ``read`` over many ticks of a recorded stream at once.
+
+Fast replay steps each driver once per 10 ms tick; for the MTi that is a parser call
+and a frame decode per tick in Python. :class:`MtiSpanReader` does what those reads
+would do for a run of ticks in one go: the bytes each tick would release, framed and
+checked by :func:`~drivers.xsens.bulk.clean_run`, the fields decoded as columns, and
+the driver's own rules applied on the columns - :func:`consistent` for
+``MtiSerialDriver._consistent``, the packet-counter gaps, the data timeout, the health
+counters - with the driver's state (parser buffer, previous frame, counters) left as
+the reads would leave it. It stops before the first tick where anything else could
+happen (noise, a bad checksum, another message, a frame it would emit with a
+non-finite value, a timeout); the per-tick ``read`` takes over there.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from drivers.base import DriverHealth, plain_copy
+from drivers.spanio import RecordedStream
+from drivers.xsens.bulk import KEYS, FrameLayout, Run, clean_run
+from drivers.xsens.mtdata2 import XDI
+from drivers.xsens.serial_driver import (
+    AGREEMENT_DEG,
+    SAMPLE_TIME_FINE_S,
+    VALUE_KEYS,
+    MtiSerialDriver,
+    orientations_agree,
+)
+
+log = logging.getLogger(__name__)
+
+_AGREE_S2 = math.sin(math.radians(AGREEMENT_DEG) / 2.0) ** 2
+_MARGIN = 1e-12
+"""Where numpy's sin/cos (not bit for bit libm's) could tip the agreement test either
+way, far wider than their rounding: those frames are checked by the scalar function."""
+
+
+def _pymax3(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Python's ``max(a, b, c)`` element-wise, NaN included (a later NaN never wins)."""
+    m = np.where(b > a, b, a)
+    return np.where(c > m, c, m)
+
+
+def consistent(e: np.ndarray, g: np.ndarray, acc: np.ndarray, q: np.ndarray | None,
+               pc: np.ndarray, stf: np.ndarray, prev: tuple[Any, ...] | None, rate: float,
+               max_gap: int) -> np.ndarray:
+    """``MtiSerialDriver._consistent`` of consecutive frames (each one's previous frame is
+    the row before; the first one's is ``prev``), the same operations in the same order."""
+    gmax = _pymax3(np.abs(g[:, 0]), np.abs(g[:, 1]), np.abs(g[:, 2]))
+    amax = _pymax3(np.abs(acc[:, 0]), np.abs(acc[:, 1]), np.abs(acc[:, 2]))
+    ok = ((np.abs(e[:, 0]) <= 180.0) & (np.abs(e[:, 1]) <= 90.0) & (np.abs(e[:, 2]) <= 180.0)
+          & (gmax <= 35.0) & (amax <= 200.0))
+    if q is not None:
+        ok &= _agree(e, q)
+    n = len(pc)
+    if n == 0:
+        return ok
+    ppc, pstf, pe = np.empty(n, np.int64), np.empty(n, np.int64), np.empty((n, 3))
+    ppc[1:], pstf[1:], pe[1:] = pc[:-1], stf[:-1], e[:-1]
+    if prev is not None:
+        ppc[0], pstf[0], pe[0] = prev[0], prev[1], prev[2]
+    steps = (pc - ppc) & 0xFFFF
+    dt = ((stf - pstf) & 0xFFFFFFFF) * SAMPLE_TIME_FINE_S
+    chain = (1 <= steps) & (steps <= max_gap) & ~(np.abs(dt - steps / rate)
+                                                  > 1.5 * SAMPLE_TIME_FINE_S)
+    limit = 2.0 + 3.0 * 57.3 * gmax * dt
+    for a in range(3):
+        chain &= ~(np.abs(np.remainder(e[:, a] - pe[:, a] + 180.0, 360.0) - 180.0) > limit)
+    if prev is None:
+        chain[0] = True
+    return ok & chain
+
+
+def _agree(e: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """:func:`orientations_agree` of each row, the doubtful ones by the function itself."""
+    q0, q1, q2, q3 = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    n2 = q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3
+    h = np.radians(e) * 0.5
+    c, s = np.cos(h), np.sin(h)
+    cr, cp, cy, sr, sp, sy = c[:, 0], c[:, 1], c[:, 2], s[:, 0], s[:, 1], s[:, 2]
+    dot = ((cr * cp * cy + sr * sp * sy) * q0 + (sr * cp * cy - cr * sp * sy) * q1
+           + (cr * sp * cy + sr * cp * sy) * q2 + (cr * cp * sy - sr * sp * cy) * q3)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        s2 = 1.0 - dot * dot / n2
+    out = (np.abs(n2 - 1.0) <= 1e-4) & (s2 <= _AGREE_S2)
+    for i in np.flatnonzero(np.abs(s2 - _AGREE_S2) <= _MARGIN).tolist():
+        out[i] = orientations_agree(tuple(e[i].tolist()), tuple(q[i].tolist()))
+    return out
+
+
+@dataclass
+class SpanRead:
+    """What the reads of ticks ``k0 .. k0 + ticks - 1`` did."""
+
+    k0: int
+    ticks: int
+    reading_ticks: np.ndarray
+    """Tick of each emitted reading."""
+    values: dict[str, np.ndarray]
+    """Each of :data:`VALUE_KEYS` per emitted reading (every one valid)."""
+    exhausted: np.ndarray
+    """Per tick: the recording had no chunk left after its release."""
+    base: DriverHealth
+    """The driver's health before the first tick."""
+    cum: dict[str, np.ndarray]
+    """Per tick: ``messages``, ``bad_frames``, ``dropped_packets`` added so far, and the
+    ``last_reading_t`` then (NaN: unchanged)."""
+
+    def health_after(self, i: int) -> DriverHealth:
+        """A copy of the driver's health as it was after tick ``k0 + i``."""
+        b, c = self.base, self.cum
+        h = DriverHealth(b.connected, b.messages + int(c["messages"][i]),
+                         b.bad_frames + int(c["bad_frames"][i]), b.rejected_bytes, b.timeouts,
+                         b.reconnects, b.last_reading_t, b.last_error, plain_copy(b.extra))
+        t = float(c["last_reading_t"][i])
+        if not math.isnan(t):
+            h.last_reading_t = t
+        h.extra["inconsistent_frames"] += int(c["bad_frames"][i])
+        h.extra["dropped_packets"] += int(c["dropped_packets"][i])
+        return h
+
+
+class MtiSpanReader:
+    """An :class:`MtiSerialDriver` read tick after tick from an in-memory recording.
+
+    ``port`` holds ``stream`` (the recorded ``(time, bytes)`` chunks, released at the
+    first tick at or after their time), ``position`` (chunks released so far),
+    ``in_waiting`` and ``advance(j)``; the driver's data timeout must run on the clock
+    that stamps its readings (capture time).
+    """
+
+    def __init__(self, driver: MtiSerialDriver, port: Any, period: float) -> None:
+        self.driver = driver
+        self.port = port
+        self.period = period
+        self.stream = RecordedStream(port)
+        self._layouts: dict[bytes, FrameLayout] = {}
+
+    def usable(self) -> bool:
+        """Whether a span read can start now (connected, nothing unread on the port)."""
+        d = self.driver
+        return (d.health.connected and d._ser is self.port and not self.port.in_waiting
+                and d.timeout_clock is d.clock)
+
+    def read(self, k0: int, k1: int) -> SpanRead | None:
+        """Do the reads of ticks ``k0 .. k1 - 1`` (as far as nothing else can happen);
+        None if not even the first tick can be done so."""
+        if not self.usable():
+            return None
+        d = self.driver
+        rel = self.stream.released(d._parser._sniffer._buf, k0, k1, self.period)
+        tk, j, buf = rel.t, rel.chunks, rel.data
+        run = clean_run(buf, d._parser.max_payload, self._layouts)
+        if run is None:
+            return None
+        fields = run.layout.fields_of(KEYS + ((XDI.QUATERNION,) if d._redundant else ()))
+        if fields is None:
+            return None
+        rows, length = run.rows, run.layout.length
+        cols = {k: FrameLayout.column(rows, f) for k, f in fields.items()}
+        e, g, acc = cols[XDI.EULER_ANGLES], cols[XDI.RATE_OF_TURN], cols[XDI.ACCELERATION]
+        pc, stf, sw = (cols[XDI.PACKET_COUNTER], cols[XDI.SAMPLE_TIME_FINE],
+                       cols[XDI.STATUS_WORD])
+        rate = float(d.health.extra.get("output_rate_hz") or d.rate_hz)
+        ok = consistent(e, g, acc, cols.get(XDI.QUATERNION), pc, stf, d._prev_frame, rate,
+                        d.MAX_GAP)
+        # a frame it would emit with a NaN or an infinity: the per-tick read handles it
+        finite = np.isfinite(g).all(axis=1) & np.isfinite(acc).all(axis=1)
+        bad = np.flatnonzero(ok & ~finite)
+        clean_end = run.clean_end if not len(bad) else int(bad[0]) * length
+        nt = int(np.searchsorted(rel.ends, clean_end, side="right"))  # ticks inside clean bytes
+        ends = (np.arange(len(rows)) + 1) * length
+        arrive = np.searchsorted(rel.ends, ends, side="left")  # tick index of each frame
+        # the data timeout: a tick whose read finds no frame for data_timeout_s raises
+        got = np.full(len(tk), -np.inf)
+        got[arrive[arrive < len(tk)]] = tk[arrive[arrive < len(tk)]]
+        last_valid = np.maximum(np.maximum.accumulate(got), d._last_valid)
+        late = np.flatnonzero(tk - last_valid > d.data_timeout_s)
+        if len(late):
+            nt = min(nt, int(late[0]))
+        if nt == 0:
+            return None
+        nf = int(np.searchsorted(arrive, nt, side="left"))  # frames read by those ticks
+        return self._commit(k0, nt, tk, j, rel.ends, buf, run, nf, ok[:nf], cols, e, g, acc, pc,
+                            stf, sw, last_valid)
+
+    def _commit(self, k0: int, nt: int, tk: np.ndarray, j: np.ndarray, rel: np.ndarray,
+                buf: np.ndarray, run: Run, nf: int, ok: np.ndarray,
+                cols: dict[int, np.ndarray], e: np.ndarray, g: np.ndarray, acc: np.ndarray,
+                pc: np.ndarray, stf: np.ndarray, sw: np.ndarray,
+                last_valid: np.ndarray) -> SpanRead:
+        """Leave the driver, its parser and the port as the reads of ``nt`` ticks would."""
+        d, port = self.driver, self.port
+        h = d.health
+        base = h.snapshot()
+        arrive = np.searchsorted(rel, (np.arange(nf) + 1) * run.layout.length, side="left")
+        em = np.flatnonzero(ok)  # the frames emitted
+        counters = pc[:nf][em]
+        prevs = np.empty(len(counters), np.int64)
+        prevs[1:] = counters[:-1]
+        gaps = np.zeros(len(counters), np.int64)
+        if len(counters):
+            if d._prev_counter is not None:
+                prevs[0] = d._prev_counter
+            gaps = (counters - prevs - 1) & 0xFFFF
+            if d._prev_counter is None:
+                gaps[0] = 0
+            for i in np.flatnonzero(gaps >= 0x8000).tolist():
+                log.warning("%s: packet counter jumped back from %d to %d", d.name,
+                            int(prevs[i]), int(counters[i]))
+            gaps[gaps >= 0x8000] = 0
+            d._prev_counter = int(counters[-1])
+        if nf:
+            d._prev_frame = (int(pc[nf - 1]), int(stf[nf - 1]), tuple(e[nf - 1].tolist()))
+        em_tick = arrive[em]
+        per_tick = {"messages": np.bincount(em_tick, minlength=nt)[:nt],
+                    "bad_frames": np.bincount(arrive[~ok], minlength=nt)[:nt],
+                    "dropped_packets": np.bincount(em_tick, weights=gaps, minlength=nt)[:nt]}
+        cum = {k: np.cumsum(v).astype(np.int64) for k, v in per_tick.items()}
+        last_t = np.full(nt, np.nan)
+        last_t[em_tick] = tk[em_tick]
+        cum["last_reading_t"] = _ffill(last_t)
+        h.messages += len(em)
+        h.bad_frames += int(len(ok) - len(em))
+        h.extra["inconsistent_frames"] += int(len(ok) - len(em))
+        h.extra["dropped_packets"] += int(gaps.sum())
+        if len(em):
+            h.last_reading_t = float(tk[em_tick[-1]])
+        d._last_valid = float(last_valid[nt - 1])
+        sniffer = d._parser._sniffer
+        sniffer._buf = bytearray(buf[nf * run.layout.length:rel[nt - 1]].tobytes())
+        sniffer.frames += nf
+        port.advance(int(j[nt - 1]))
+        vals = (e[:, 0], e[:, 1], e[:, 2], g[:, 0], g[:, 1], g[:, 2], acc[:, 0], acc[:, 1],
+                acc[:, 2], pc.astype(float), stf.astype(float), sw.astype(float))
+        every = len(em) == nf  # the usual case: views, no copies
+        values = {k: v[:nf] if every else v[:nf][em]
+                  for k, v in zip(VALUE_KEYS, vals, strict=True)}
+        return SpanRead(k0, nt, k0 + em_tick, values, j[:nt] >= self.stream.chunk_count, base,
+                        cum)
+
+
+def _ffill(a: np.ndarray) -> np.ndarray:
+    """Each NaN replaced by the last number before it (NaN where there is none)."""
+    idx = np.where(~np.isnan(a), np.arange(len(a)), -1)
+    np.maximum.accumulate(idx, out=idx)
+    return np.where(idx >= 0, a[np.maximum(idx, 0)], np.nan)
