@@ -126,6 +126,10 @@ def exclusion_masks(table: SignalsTable, model: Model, cfg: ExclusionConfig,
     return FileData(table.source, kin, payload, use, static, excluded, noise)
 
 
+NOISE_STRIDE = 4
+"""The position noise's correction is taken on every 4th sample: on 3 machines the
+parameters moved by under 0.004 standard errors against every sample, and calibration
+took 0.65-0.74 s instead of 1.02-1.18 s (0.70 s without the correction)."""
 POSITION_SENSORS = {"th": ("thd", "thdd"), "d": ("dd", "ddd")}
 """The position readings whose noise the fit corrects for, and the rate and
 acceleration smoothed from each."""
@@ -145,7 +149,7 @@ def position_noise_errors(files: list[FileData], window_s: float, polyorder: int
     for key, names in POSITION_SENSORS.items():
         sigma = float(np.median([f.noise.get(key, 0.0) for f in files]))
         if sigma > 0:
-            errors += [replace(e, shift={n: moving for n in e.shift})
+            errors += [replace(e, shift={n: moving for n in e.shift}, stride=NOISE_STRIDE)
                        for e in output_error.rate_errors(sigma, names, dt, window, polyorder)]
     return errors
 

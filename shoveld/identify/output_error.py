@@ -127,6 +127,10 @@ class InputError:
     shift: dict[str, float | np.ndarray]
     variance: float = 1.0
     step: float = 1.0
+    stride: int = 1
+    """Take the expectation on every ``stride``-th sample, each standing for its
+    neighbours (it is a smooth function of the motion; the cost is the equations'
+    evaluation on the data moved by the error)."""
 
 
 def field_error(sigma_a: float) -> InputError:
@@ -165,19 +169,26 @@ def input_noise_correction(model: Model, k: Kinematics, ce: CurrentEquations, p:
     standard errors over 120 simulated machines, and the angles' noise K_C by 0.5.
     """
     total = np.zeros(len(p))
-    jac = ce.jacobian(p, m)
-    r0 = ce.residual(p, m)
-    for e in errors:
-        h = e.step
-        moved = [CurrentEquations(model, replace(k, **{f: getattr(k, f) + sign * h * a
-                                                       for f, a in e.shift.items()}))
-                 for sign in (1.0, -1.0)]
-        rp, rm = (c.residual(p, m) for c in moved)
-        r1 = (rp - rm) / (2 * h)
-        r2 = (rp - 2 * r0 + rm) / (h * h)
-        j1 = (moved[0].jacobian(p, m) - moved[1].jacobian(p, m)) / (2 * h)
-        term = (jac * (0.5 * r2)[:, :, None] + j1 * r1[:, :, None]) * w2[:, :, None]
-        total += np.einsum("kep->p", np.where(np.isfinite(term), term, 0.0)) * e.variance
+    for stride in sorted({e.stride for e in errors}):
+        if stride == 1:
+            k_s, ce_s, m_s, w2_s = k, ce, m, w2
+        else:
+            idx = np.arange(0, len(m), stride)
+            k_s, m_s, w2_s = k.take(idx), m[idx], w2[idx] * stride
+            ce_s = CurrentEquations(model, k_s)
+        jac = ce_s.jacobian(p, m_s)
+        r0 = ce_s.residual(p, m_s)
+        for e in (e for e in errors if e.stride == stride):
+            h = e.step
+            moved = [CurrentEquations(model, replace(k_s, **{
+                f: getattr(k_s, f) + sign * h * (a if np.ndim(a) == 0 else a[::stride])
+                for f, a in e.shift.items()})) for sign in (1.0, -1.0)]
+            rp, rm = (c.residual(p, m_s) for c in moved)
+            r1 = (rp - rm) / (2 * h)
+            r2 = (rp - 2 * r0 + rm) / (h * h)
+            j1 = (moved[0].jacobian(p, m_s) - moved[1].jacobian(p, m_s)) / (2 * h)
+            term = (jac * (0.5 * r2)[:, :, None] + j1 * r1[:, :, None]) * w2_s[:, :, None]
+            total += np.einsum("kep->p", np.where(np.isfinite(term), term, 0.0)) * e.variance
     return total
 
 
