@@ -27,6 +27,8 @@ from typing import Any
 
 import numpy as np
 
+from shoveld.model.terms import knot_group
+
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import payload_accuracy as pa  # noqa: E402  (bench/ is not a package)
 
@@ -86,7 +88,7 @@ def payload_job(job: dict[str, Any]) -> dict[str, Any]:
     seed = job["seed"]
     machine = Machine.draw(seed)
     p = pa.calibrate(machine, seed, "output")
-    truth = pa.truth_of(machine, p)
+    truth = machine.truth_for(p)
     p_true = dataclasses.replace(p, values=np.array([truth[n] for n in p.names]))
     out: dict[str, Any] = {}
     for label, name, oracle in PAYLOAD_ROWS:
@@ -104,8 +106,8 @@ def ablation_job(job: tuple[str, int]) -> tuple[str, dict[str, tuple[float, floa
     name, seed = job
     machine = variant(Machine.draw(seed), name)
     p = pa.calibrate(machine, seed, "output")
-    truth = pa.truth_of(machine, p)
-    return name, {pa.knot_group(n): (float(v) - truth[n], float(se), truth[n])
+    truth = machine.truth_for(p)
+    return name, {knot_group(n): (float(v) - truth[n], float(se), truth[n])
                   for n, v, se in zip(p.names, p.values, p.stderr, strict=True)}
 
 

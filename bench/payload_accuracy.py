@@ -33,22 +33,9 @@ from typing import Any
 
 import numpy as np
 
+from shoveld.model.terms import knot_group
+
 RATED = 35000.0
-
-
-def truth_of(machine: Any, params: Any) -> dict[str, float]:
-    """True values of the identified parameters (per measured ampere, measured field)."""
-    tr = machine.identified_truth()
-    out = {}
-    nominal = float(params.hyper.get("hoist_drive", {}).get("field_nominal_a", 70.0))
-    for n in params.names:
-        if n == "K_H":
-            out[n] = machine.k_h_at(nominal)
-        elif n.startswith("K_H_f"):
-            out[n] = machine.k_h_at(float(n[5:]))
-        else:
-            out[n] = tr[n]
-    return out
 
 
 SMOOTHING: dict[str, Any] = {}
@@ -132,15 +119,6 @@ def one_machine(job: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def knot_group(name: str) -> str:
-    """Field knots by the nearest 10 A: the calibration places them where each machine's
-    data have field currents (K_H_f29 on one, K_H_f30 on the next), so a table by exact
-    name would leave most of them out."""
-    if not name.startswith("K_H_f"):
-        return name
-    return f"K_H_f{10 * round(float(name[5:]) / 10):.0f}~"
-
-
 def coverage_machine(job: tuple[int, int]) -> dict[str, Any]:
     """Identified against true parameters on one machine: (seed, verified passes)."""
     from shoveld.sim.machine import Machine
@@ -149,7 +127,7 @@ def coverage_machine(job: tuple[int, int]) -> dict[str, Any]:
     machine = Machine.draw(seed)
     p = (calibrate_with_verified(machine, seed, verified) if verified
          else calibrate(machine, seed, "output"))
-    tr = truth_of(machine, p)
+    tr = machine.truth_for(p)
     return {n: (float(v), float(se), tr[n]) for n, v, se in
             zip(p.names, p.values, p.stderr, strict=True)}
 

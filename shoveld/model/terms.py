@@ -265,6 +265,23 @@ class _Linear:
         return np.stack([1.0 - f, f], axis=1)
 
 
+FIELD_KNOT_PREFIX = "K_H_f"
+"""Name of a field knot's parameter: the prefix, then the knot's field current (A)."""
+
+
+def field_knot_a(name: str) -> float | None:
+    """The field current of a field knot's parameter (``K_H_f30`` -> 30.0), else None."""
+    return float(name[len(FIELD_KNOT_PREFIX):]) if name.startswith(FIELD_KNOT_PREFIX) else None
+
+
+def knot_group(name: str) -> str:
+    """Field knots by the nearest 10 A (``K_H_f29`` -> ``K_H_f30~``), other names as they
+    are: the calibration places the knots where each machine's data have field
+    currents, so statistics over machines by exact name would leave most out."""
+    a = field_knot_a(name)
+    return name if a is None else f"{FIELD_KNOT_PREFIX}{10 * round(a / 10):.0f}~"
+
+
 @register_term
 class HoistDrive(Term):
     """Hoist rope tension K_H(i_f) * i_H acting at the bail along the rope.
@@ -291,7 +308,8 @@ class HoistDrive(Term):
         knots = tuple(sorted({nominal, *(float(k) for k in hyper.get("field_knots_a", ()))}))
         self.knots = knots
         self.nominal_index = knots.index(nominal)
-        self.params = tuple("K_H" if k == nominal else f"K_H_f{k:g}" for k in knots)
+        self.params = tuple("K_H" if k == nominal else f"{FIELD_KNOT_PREFIX}{k:g}"
+                            for k in knots)
         self.units = tuple("N per A" for _ in knots)
         self.uses_field_current = len(knots) > 1
         """Terms with this flag model the field: no sample is excluded for a weak field."""

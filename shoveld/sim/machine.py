@@ -23,11 +23,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from shoveld.sim.plant import PlantParams
+
+if TYPE_CHECKING:
+    from shoveld.model.params import ModelParams
 
 CURRENT_FULL_SCALE_A = 4000.0
 """Range of the armature current transducers (thesis: 4000 A Hall sensors)."""
@@ -227,6 +230,21 @@ class Machine:
                 "K_C": pp.K_C / (1 + s.crowd.gain), "fv3": pp.fv3, "fc3": pp.fc3,
                 "fv4": pp.fv4, "fc4": pp.fc4,
                 "i_H0": s.hoist1.offset_a + s.hoist2.offset_a, "i_C0": s.crowd.offset_a}
+
+    def truth_for(self, params: ModelParams) -> dict[str, float]:
+        """True values of the parameters ``params`` names (:meth:`identified_truth`, with
+        K_H at the params' nominal field and each field knot at its own field current),
+        to hold an identification from this machine's data against."""
+        from shoveld.model.terms import field_knot_a
+
+        tr = self.identified_truth()
+        nominal = float(params.hyper.get("hoist_drive", {}).get("field_nominal_a", 70.0))
+        out = {}
+        for n in params.names:
+            knot = field_knot_a(n)
+            out[n] = (self.k_h_at(nominal) if n == "K_H" else
+                      self.k_h_at(knot) if knot is not None else tr[n])
+        return out
 
     def k_h_at(self, field_measured_a: float) -> float:
         """True pull per measured ampere at a *measured* hoist field current."""

@@ -14,22 +14,6 @@ from shoveld.sim.machine import Machine
 from shoveld.sim.scenario import DEFAULT_MACHINE_SEED, SimResult, simulate_calibration
 
 
-def machine_truth(machine: Machine, params: ModelParams) -> dict[str, float]:
-    """True values of the identified parameters: per *measured* ampere at the *measured*
-    field, offsets of the measured currents."""
-    tr = machine.identified_truth()
-    nominal = float(params.hyper["hoist_drive"]["field_nominal_a"])
-    out = {}
-    for n in params.names:
-        if n == "K_H":
-            out[n] = machine.k_h_at(nominal)
-        elif n.startswith("K_H_f"):
-            out[n] = machine.k_h_at(float(n[5:]))
-        else:
-            out[n] = tr[n]
-    return out
-
-
 @pytest.fixture(scope="module")
 def ideal_params() -> ModelParams:
     m = Machine.ideal()
@@ -58,7 +42,7 @@ def test_a_realistic_machine_is_recovered_within_its_standard_errors(params: Mod
     """Offsets, gain errors, 12-bit currents and field weakening: the gravity part, the
     force constants over the field and the offsets come back within 3 standard errors
     (the statistics over many machines are bench/payload_accuracy.py's)."""
-    tr = machine_truth(Machine.draw(DEFAULT_MACHINE_SEED), params)
+    tr = Machine.draw(DEFAULT_MACHINE_SEED).truth_for(params)
     checked = [n for n in params.names if n in GRAVITY_AND_DRIVES or n.startswith("K_H")]
     assert len([n for n in checked if n.startswith("K_H")]) >= 3  # the curve has knots
     for n in checked:
@@ -71,7 +55,7 @@ def test_thesis_form_is_biased_where_output_error_is_not(
         calib_trials: tuple[SimResult, SimResult], params: ModelParams) -> None:
     """Errors in variables and offsets: the thesis's form puts the noisy currents in the
     regressor and knows no offsets; K_C comes out several standard errors low there."""
-    tr = machine_truth(Machine.draw(DEFAULT_MACHINE_SEED), params)
+    tr = Machine.draw(DEFAULT_MACHINE_SEED).truth_for(params)
     eq = Calibrator(method="equation").fit([t.table for t in calib_trials]).params_
     assert eq is not None
     se = float(params.stderr[params.names.index("K_C")])

@@ -16,9 +16,9 @@ import pytest
 from shoveld.engine.offline import estimate_table
 from shoveld.identify.calibrate import Calibrator
 from shoveld.model.params import ModelParams
+from shoveld.model.terms import knot_group
 from shoveld.sim.machine import Channel, FieldDrive, Machine
 from shoveld.sim.scenario import SimResult, simulate_calibration, simulate_cycles
-from tests.engine.test_calibrate import machine_truth
 
 N_MACHINES = 20
 """Machines drawn for the coverage test: the issue's "at least 20" (the bench uses 24
@@ -85,7 +85,7 @@ def test_standard_errors_are_honest_over_machines(
     mean error under half the mean standard error."""
     errs, ses = [], []
     for m, p in machine_runs:
-        tr = machine_truth(m, p)
+        tr = m.truth_for(p)
         errs.append(p.get(name) - tr[name])
         ses.append(float(p.stderr[p.names.index(name)]))
     e, se = np.array(errs), np.array(ses)
@@ -102,12 +102,12 @@ def test_the_field_curve_is_unbiased_over_machines(
     (73 % covered) over 120 machines until the curve went on along its slope below it,
     the spline's ends became not-a-knot and the field channel's noise was taken out of
     the score (docs/engine.md)."""
-    groups: dict[int, list[tuple[float, float]]] = {}
+    groups: dict[str, list[tuple[float, float]]] = {}
     for m, p in machine_runs:
-        tr = machine_truth(m, p)
+        tr = m.truth_for(p)
         for n, v, se in zip(p.names, p.values, p.stderr, strict=True):
             if n.startswith("K_H_f"):
-                groups.setdefault(10 * round(float(n[5:]) / 10), []).append(
+                groups.setdefault(knot_group(n), []).append(
                     (float(v) - tr[n], float(se)))
     held = {g: rows for g, rows in groups.items() if len(rows) >= 10}
     assert len(held) >= 3, sorted(groups)
@@ -137,7 +137,7 @@ def test_the_angles_noise_is_taken_out_of_the_identification() -> None:
         for corrected in (False, True):
             p = Calibrator(position_noise=corrected).fit(tables).params_
             assert p is not None
-            tr = machine_truth(m, p)
+            tr = m.truth_for(p)
             for name in ("J", "K_C"):
                 z = (p.get(name) - tr[name]) / float(p.stderr[p.names.index(name)])
                 bias[corrected].setdefault(name, []).append(z)
@@ -155,7 +155,7 @@ def test_friction_is_unbiased_over_machines(
     the crowd's pair a strict xfail here) until held poses stopped taking the noise the
     fit differentiated for motion. Their coverage is the bench's (120 machines: 96-99 %);
     20 machines measure a share near 95 % too coarsely to hold it to 90 %."""
-    e = np.array([p.get(name) - machine_truth(m, p)[name] for m, p in machine_runs])
+    e = np.array([p.get(name) - m.truth_for(p)[name] for m, p in machine_runs])
     se = np.array([float(p.stderr[p.names.index(name)]) for _, p in machine_runs])
     assert abs(e.mean()) < 0.5 * se.mean(), (name, e / se)
 
