@@ -394,6 +394,7 @@ class Calibrator:
                                   f"{output_error.BLOCK_S:g} s, plus a handle-angle drift "
                                   f"of {self.angle_drift_deg:g} deg per file",
                        angle_drift_deg=self.angle_drift_deg)
+            fit["input_noise_corrected"] = of.corrected
             if self.position_noise:
                 # What the errors-in-variables correction took each reading's noise to be.
                 fit["position_noise"] = {

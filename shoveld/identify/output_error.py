@@ -64,6 +64,9 @@ class OutputFit:
     angle_sensitivity: np.ndarray
     """(files, parameters): parameter change per radian of offset of a file's handle
     angle; its outer product times the drift's variance is in ``cov``."""
+    corrected: bool = False
+    """Whether the inputs' noise was taken out (False: none given, or the corrected
+    steps diverged and the uncorrected fit was kept)."""
 
 
 def concat_kinematics(parts: list[Kinematics]) -> Kinematics:
@@ -270,21 +273,31 @@ def fit_output(model: Model, kins: list[Kinematics], payloads: list[np.ndarray],
             break
         sig = new
 
+    corrected = False
     errors = list(input_errors)
     if field_noise > 0 and any(getattr(t, "uses_field_current", False)
                                for t in model.terms):
         errors.insert(0, field_error(field_noise))
     if errors:
+        corrected = True
         # Solve the corrected score equations J'W r - correction = 0 by Gauss-Newton.
         # The problem is nearly linear and the correction small, so it is evaluated once,
         # at the uncorrected solution.
+        # A model the data hardly determine (a diagnosis's candidate) can make these
+        # steps grow instead of shrink; it keeps its uncorrected fit.
         _, w = weighted(p, sig)
         correction = input_noise_correction(model, k, ce, p, m, w * w, errors)
+        plain, last = p, math.inf
         for _ in range(max_iter):
             iterations += 1
             step, _ = gauss_newton(p, sig, correction)
-            p = p + step
-            if np.max(np.abs(step) / (np.abs(p) + 1e-9)) < 1e-7:
+            moved = p + step
+            rel = float(np.max(np.abs(step) / (np.abs(moved) + 1e-9)))
+            if not math.isfinite(rel) or (rel > last and rel > 1e-6):
+                p, corrected = plain, False
+                break
+            p, last = moved, rel
+            if rel < 1e-7:
                 break
 
     rw, w = weighted(p, sig)
@@ -332,4 +345,5 @@ def fit_output(model: Model, kins: list[Kinematics], payloads: list[np.ndarray],
         force_rms={"handle": float(np.sqrt(np.mean((r[:, 0] * g_h)[good[:, 0]] ** 2))),
                    "crowd": float(np.sqrt(np.mean((r[:, 1] * g_c)[good[:, 1]] ** 2)))},
         condition_number=float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf,
-        samples=int(len(m)), iterations=iterations, blocks=nb, angle_sensitivity=sens)
+        samples=int(len(m)), iterations=iterations, blocks=nb, angle_sensitivity=sens,
+        corrected=corrected)

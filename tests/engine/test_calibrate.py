@@ -149,3 +149,34 @@ def test_the_field_channels_noise_is_read_from_its_second_differences(sigma: flo
     assert field_noise_a(smooth) < 0.02
     got = field_noise_a(smooth + rng.normal(0.0, sigma, len(smooth)))
     assert got == pytest.approx(sigma, rel=0.06)
+
+
+def test_corrected_steps_that_grow_keep_the_uncorrected_fit(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The errors-in-variables correction is solved by Gauss-Newton without a cost to
+    search on. A diagnosis's candidate that the data hardly determine made those steps
+    grow until the parameters were NaN; such a fit now keeps its uncorrected solution
+    and says so. Provoked here by taking the angles' noise 100 times too large."""
+    from dataclasses import replace
+
+    from shoveld.identify import output_error
+
+    m = Machine.draw(301)
+    tables = [simulate_calibration(load, seed=3010 + i, machine=m, n_poses=4,
+                                   free_motion_s=20, fast_moves=2).table
+              for i, load in enumerate((0.0, 8420.0))]
+    honest = Calibrator().fit(tables)
+    assert honest.output_fit_ is not None and honest.output_fit_.corrected
+    assert honest.params_ is not None and honest.params_.fit["input_noise_corrected"] is True
+    plain = Calibrator(position_noise=False).fit(tables).params_
+    assert plain is not None
+    rate_errors = output_error.rate_errors
+    monkeypatch.setattr(output_error, "rate_errors", lambda *a: [
+        replace(e, variance=e.variance * 1e4) for e in rate_errors(*a)])
+    cal = Calibrator().fit(tables)
+    assert cal.output_fit_ is not None and not cal.output_fit_.corrected
+    p = cal.params_
+    assert p is not None and p.fit["input_noise_corrected"] is False
+    assert np.all(np.isfinite(p.values))
+    # the uncorrected fit: within a standard error of the one with the field's correction
+    assert np.all(np.abs(p.values - plain.values) < plain.stderr)
