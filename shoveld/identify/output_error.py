@@ -122,9 +122,8 @@ class InputError:
     """One independent error pattern of the measured inputs of the equations.
 
     ``shift``: how much each ``Kinematics`` field moves per unit of the error (a number,
-    or one per sample);
-    ``variance``: the error's variance in those units; ``step``: the finite-difference
-    step (units) with which its effect on the equations is taken.
+    or one per sample); ``variance``: the error's variance in those units; ``step``:
+    the finite-difference step (units) with which its effect on the equations is taken.
     """
 
     shift: dict[str, float | np.ndarray]
@@ -148,9 +147,9 @@ def rate_errors(sigma: float, fields: tuple[str, str], dt: float, window: int,
     the acceleration smoothed from it (``fields``), independent of each other.
 
     The smoothed value's own error (0.3 of ``sigma``: 0.009 deg on the handle)
-    is left out: measured, it moved no parameter by 0.2 % of what the rate's and the
-    acceleration's errors move it, and each error costs two evaluations of the
-    equations' Jacobian."""
+    is left out: on one machine it moved no parameter by more than 0.2 % of what the
+    rate's and the acceleration's errors move it, and each error costs two evaluations
+    of the equations' Jacobian."""
     _, sd_rate, sd_acc = smoothed_noise_sd(sigma, dt, window, polyorder)
     return [InputError({f: 1.0}, sd * sd, sd) for f, sd in zip(fields, (sd_rate, sd_acc),
                                                                strict=True)]
@@ -205,7 +204,7 @@ def fit_output(model: Model, kins: list[Kinematics], payloads: list[np.ndarray],
     effect is added to the covariance (0: not); ``field_noise``: the field-current
     channel's noise (A, 1 sigma: :func:`field_noise_a`), whose bias on the fit is
     removed (0: not); ``input_errors``: other noise in the inputs (the angles':
-    :func:`sensor_errors`), whose bias is removed likewise."""
+    :func:`rate_errors`), whose bias is removed likewise."""
     k = concat_kinematics(kins)
     m = np.concatenate(payloads)
     ok = np.concatenate(row_ok).astype(bool)
