@@ -289,9 +289,10 @@ def fit_output(model: Model, kins: list[Kinematics], payloads: list[np.ndarray],
         plain, last = p, math.inf
         for _ in range(max_iter):
             iterations += 1
-            step, _ = gauss_newton(p, sig, correction)
-            moved = p + step
-            rel = float(np.max(np.abs(step) / (np.abs(moved) + 1e-9)))
+            with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+                step, _ = gauss_newton(p, sig, correction)  # overflows are caught below
+                moved = p + step
+                rel = float(np.max(np.abs(step) / (np.abs(moved) + 1e-9)))
             if not math.isfinite(rel) or (rel > last and rel > 1e-6):
                 p, corrected = plain, False
                 break
