@@ -289,9 +289,12 @@ class Calibrator:
     angle_drift_deg: float = ANGLE_DRIFT_DEG
     """The handle-angle sensor's slow drift within a file (1 sigma), counted in the
     standard errors; 0 leaves it out."""
-    position_noise: bool = True
+    position_noise: bool = False
     """Correct the fit for the handle angle's and the crowd extension's noise (errors in
-    variables, :func:`position_noise_errors`); False: as before 2026-11-26."""
+    variables, :func:`position_noise_errors`). Off by default: over 120 simulated
+    machines it cut K_C's bias from +0.51 to +0.33 standard errors but moved J's from
+    -0.38 to +0.31 (+0.55 on the tests' 20 machines) and the 60 A field knot's to -0.54
+    there (docs/engine.md)."""
     files_: list[FileData] = field(default_factory=list, init=False)
     params_: ModelParams | None = field(default=None, init=False)
     output_fit_: output_error.OutputFit | None = field(default=None, init=False)

@@ -44,6 +44,10 @@ from shoveld.model.model import Model
 from shoveld.model.output import CHANNELS, NOISE_KEYS, CurrentEquations, noise_regressors
 
 BLOCK_S = 4.0
+RUNAWAY_SE = 50.0
+"""The corrected score's solution may move a parameter by at most this many white-noise
+standard errors from the uncorrected one (the correction moves them by a few at twice
+the simulator's angle noise; a runaway by 1e250)."""
 """Length of the blocks over which residual scores are summed for the covariance."""
 
 
@@ -283,22 +287,31 @@ def fit_output(model: Model, kins: list[Kinematics], payloads: list[np.ndarray],
         # The problem is nearly linear and the correction small, so it is evaluated once,
         # at the uncorrected solution.
         # A model the data hardly determine (a diagnosis's candidate) can make these
-        # steps grow instead of shrink; it keeps its uncorrected fit.
+        # steps grow without end; a fit whose steps do not converge, or converge far
+        # away, keeps its uncorrected solution.
         _, w = weighted(p, sig)
         correction = input_noise_correction(model, k, ce, p, m, w * w, errors)
-        plain, last = p, math.inf
+        plain, converged = p, False
         for _ in range(max_iter):
             iterations += 1
             with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
                 step, _ = gauss_newton(p, sig, correction)  # overflows are caught below
-                moved = p + step
-                rel = float(np.max(np.abs(step) / (np.abs(moved) + 1e-9)))
-            if not math.isfinite(rel) or (rel > last and rel > 1e-6):
-                p, corrected = plain, False
+                p = p + step
+                rel = float(np.max(np.abs(step) / (np.abs(p) + 1e-9)))
+            if not math.isfinite(rel):
                 break
-            p, last = moved, rel
             if rel < 1e-7:
+                converged = True
                 break
+        if converged:
+            # a solution far beyond the data's own precision is a runaway, not a correction
+            _, w = weighted(plain, sig)
+            jw = np.where(np.isfinite(jac := ce.jacobian(plain, m)), jac, 0.0) * w[:, :, None]
+            jr = jw.reshape(-1, n_p)
+            se = np.sqrt(np.abs(np.diag(np.linalg.pinv(jr.T @ jr)))) + 1e-12
+            converged = float(np.max(np.abs(p - plain) / se)) < RUNAWAY_SE
+        if not converged:
+            p, corrected = plain, False
 
     rw, w = weighted(p, sig)
     jac = ce.jacobian(p, m)

@@ -173,7 +173,7 @@ def test_corrected_steps_that_grow_keep_the_uncorrected_fit(
     rate_errors = output_error.rate_errors
     monkeypatch.setattr(output_error, "rate_errors", lambda *a: [
         replace(e, variance=e.variance * 1e4) for e in rate_errors(*a)])
-    cal = Calibrator().fit(tables)
+    cal = Calibrator(position_noise=True).fit(tables)
     assert cal.output_fit_ is not None and not cal.output_fit_.corrected
     p = cal.params_
     assert p is not None and p.fit["input_noise_corrected"] is False
