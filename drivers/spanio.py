@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from drivers.base import DriverHealth
+
 
 @dataclass
 class Released:
@@ -65,3 +67,24 @@ class RecordedStream:
         data = np.concatenate([np.frombuffer(bytes(held), dtype=np.uint8),
                                self.data[base:self.offsets[j[-1]]]])
         return Released(t, j, ends, data)
+
+
+@dataclass
+class SpanResult:
+    """What a span reader's reads of ticks ``k0 .. k0 + ticks - 1`` did; each driver's
+    subclass adds what its health after each tick needs (:meth:`health_after`)."""
+
+    k0: int
+    ticks: int
+    reading_ticks: np.ndarray
+    """Tick of each emitted reading."""
+    values: dict[str, np.ndarray]
+    """Each quantity the driver reads, per emitted reading."""
+    exhausted: np.ndarray
+    """Per tick: the recording had nothing left to release after it."""
+    base: DriverHealth
+    """The driver's health before the first tick."""
+
+    def health_after(self, i: int) -> DriverHealth:
+        """A copy of the driver's health as it was after tick ``k0 + i``."""
+        raise NotImplementedError

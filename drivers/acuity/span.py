@@ -21,8 +21,8 @@ from typing import Any
 import numpy as np
 
 from drivers.acuity.ar4000 import DISTANCE, NO_TARGET, Ar4000Driver, parse_line
-from drivers.base import DriverHealth, plain_copy
-from drivers.spanio import RecordedStream
+from drivers.base import DriverHealth
+from drivers.spanio import RecordedStream, SpanResult
 
 _LF = 0x0A
 _CR = 0x0D
@@ -31,30 +31,19 @@ _MAX_PARSED = 100_000
 
 
 @dataclass
-class LineSpan:
-    """What the reads of ticks ``k0 .. k0 + ticks - 1`` did."""
+class LineSpan(SpanResult):
+    """The AR4000's span reads: a reading per line, ``distance_m`` NaN where the line
+    said no target or was implausible (the reading marks it invalid)."""
 
-    k0: int
-    ticks: int
-    reading_ticks: np.ndarray
-    """Tick of each line (each emits one reading)."""
-    values: dict[str, np.ndarray]
-    """``distance_m`` per line; NaN where the line said no target or was implausible
-    (the reading marks it invalid)."""
-    exhausted: np.ndarray
-    """Per tick: the recording had no chunk left after its release."""
-    base: DriverHealth
-    """The driver's health before the first tick."""
     cum: dict[str, np.ndarray]
     """Per tick: ``messages``, ``no_target``, ``implausible`` added so far, and the time
     of the last line then (NaN: none yet in the span)."""
 
     def health_after(self, i: int) -> DriverHealth:
         """A copy of the driver's health as it was after tick ``k0 + i``."""
-        b, c = self.base, self.cum
-        h = DriverHealth(b.connected, b.messages + int(c["messages"][i]), b.bad_frames,
-                         b.rejected_bytes, b.timeouts, b.reconnects, b.last_reading_t,
-                         b.last_error, plain_copy(b.extra))
+        c = self.cum
+        h = self.base.snapshot()
+        h.messages += int(c["messages"][i])
         t = float(c["last_t"][i])
         if t == t:  # a line by then: not silent, its time the last reading's
             h.last_reading_t = t

@@ -19,9 +19,10 @@ from typing import Any
 
 import numpy as np
 
-from drivers.base import DriverHealth, plain_copy
+from drivers.base import DriverHealth
 from drivers.capture.format import RegisterRead
 from drivers.modbus_adc.driver import ModbusAdcDriver
+from drivers.spanio import SpanResult
 
 
 @dataclass
@@ -43,19 +44,10 @@ def _block(reads: list[RegisterRead], count: int) -> _Block:
 
 
 @dataclass
-class PollSpan:
-    """What the reads of ticks ``k0 .. k0 + ticks - 1`` did."""
+class PollSpan(SpanResult):
+    """The ADC's span reads: a reading per poll, every channel valid; ``exhausted`` is
+    always True (a recording of registers has no stream to run out of)."""
 
-    k0: int
-    ticks: int
-    reading_ticks: np.ndarray
-    """Tick of each poll (each emits one reading, every channel valid)."""
-    values: dict[str, np.ndarray]
-    """Each channel's value per poll."""
-    exhausted: np.ndarray
-    """Per tick: always True (a recording of registers has no stream to run out of)."""
-    base: DriverHealth
-    """The driver's health before the first tick."""
     polls: np.ndarray
     """Per tick: polls done so far in the span."""
     times: np.ndarray
@@ -63,9 +55,7 @@ class PollSpan:
 
     def health_after(self, i: int) -> DriverHealth:
         """A copy of the driver's health as it was after tick ``k0 + i``."""
-        b = self.base
-        h = DriverHealth(b.connected, b.messages, b.bad_frames, b.rejected_bytes, b.timeouts,
-                         b.reconnects, b.last_reading_t, b.last_error, plain_copy(b.extra))
+        h = self.base.snapshot()
         n = int(self.polls[i])
         if n:
             _polled(h, n, float(self.times[n - 1]))

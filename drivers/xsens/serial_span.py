@@ -21,8 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from drivers.base import DriverHealth, plain_copy
-from drivers.spanio import RecordedStream
+from drivers.base import DriverHealth
+from drivers.spanio import RecordedStream, SpanResult
 from drivers.xsens.bulk import KEYS, FrameLayout, Run, clean_run
 from drivers.xsens.mtdata2 import XDI
 from drivers.xsens.serial_driver import (
@@ -95,29 +95,20 @@ def _agree(e: np.ndarray, q: np.ndarray) -> np.ndarray:
 
 
 @dataclass
-class SpanRead:
-    """What the reads of ticks ``k0 .. k0 + ticks - 1`` did."""
+class SpanRead(SpanResult):
+    """The MTi's span reads: each of :data:`VALUE_KEYS` per emitted reading (every one
+    valid)."""
 
-    k0: int
-    ticks: int
-    reading_ticks: np.ndarray
-    """Tick of each emitted reading."""
-    values: dict[str, np.ndarray]
-    """Each of :data:`VALUE_KEYS` per emitted reading (every one valid)."""
-    exhausted: np.ndarray
-    """Per tick: the recording had no chunk left after its release."""
-    base: DriverHealth
-    """The driver's health before the first tick."""
     cum: dict[str, np.ndarray]
     """Per tick: ``messages``, ``bad_frames``, ``dropped_packets`` added so far, and the
     ``last_reading_t`` then (NaN: unchanged)."""
 
     def health_after(self, i: int) -> DriverHealth:
         """A copy of the driver's health as it was after tick ``k0 + i``."""
-        b, c = self.base, self.cum
-        h = DriverHealth(b.connected, b.messages + int(c["messages"][i]),
-                         b.bad_frames + int(c["bad_frames"][i]), b.rejected_bytes, b.timeouts,
-                         b.reconnects, b.last_reading_t, b.last_error, plain_copy(b.extra))
+        c = self.cum
+        h = self.base.snapshot()
+        h.messages += int(c["messages"][i])
+        h.bad_frames += int(c["bad_frames"][i])
         t = float(c["last_reading_t"][i])
         if not math.isnan(t):
             h.last_reading_t = t

@@ -27,12 +27,13 @@ from typing import Any
 import numpy as np
 
 from drivers.acuity.ar4000 import Ar4000Driver
-from drivers.acuity.span import Ar4000SpanReader, LineSpan
+from drivers.acuity.span import Ar4000SpanReader
 from drivers.base import DriverHealth, Reading
 from drivers.modbus_adc.driver import ModbusAdcDriver
-from drivers.modbus_adc.span import ModbusSpanReader, PollSpan
+from drivers.modbus_adc.span import ModbusSpanReader
+from drivers.spanio import SpanResult
 from drivers.xsens.serial_driver import MtiSerialDriver
-from drivers.xsens.serial_span import MtiSpanReader, SpanRead
+from drivers.xsens.serial_span import MtiSpanReader
 from shoveld.daemon.assemble import DeviceState
 from shoveld.daemon.config import LASER_KINDS, MTI_KINDS, DeviceConfig
 from shoveld.daemon.store import ReadingStore
@@ -47,7 +48,6 @@ _BIT = {name: 1 << i for i, name in enumerate(SIGNAL_FIELDS)}
 _EMPTY: frozenset[str] = frozenset()
 SpanReader = MtiSpanReader | Ar4000SpanReader | ModbusSpanReader
 """A driver's reads of a run of ticks at once (``read(k0, k1)``; None where it cannot)."""
-DriverSpan = SpanRead | LineSpan | PollSpan
 _SPAN_READ_TICKS = 3000
 """Ticks a span read takes on at most (its buffers stay small; its cost is per call)."""
 _RETRY_MAX_TICKS = 64
@@ -225,7 +225,7 @@ class BulkFeed:
             k += 1
         self._retry[name] = retry
 
-    def _take(self, tr: Track, got: DriverSpan, look: set[int], first: bool) -> None:
+    def _take(self, tr: Track, got: SpanResult, look: set[int], first: bool) -> None:
         """A span read's readings, connection, end and health into the device's track."""
         n, k0, period = got.ticks, got.k0, self.period
         tr.tick.extend(got.reading_ticks.tolist())
