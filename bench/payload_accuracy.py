@@ -18,9 +18,12 @@ beside the ideal simulator:
     .venv/bin/python bench/payload_accuracy.py [--machines 18] [--passes 60]
                                                [--coverage 120] [--jobs 2]
                                                [--window S --polyorder N]
+                                               [--angle-noise]
 
 ``--window``/``--polyorder`` set the angles' Savitzky-Golay smoothing of identification
 (the engine follows what the params record); docs/engine.md, "Smoothing".
+``--angle-noise`` identifies with the angles' errors-in-variables correction
+(``calibrate --angle-noise``, off by default); docs/engine.md, "The angles' noise".
 """
 
 from __future__ import annotations
@@ -164,8 +167,11 @@ def main() -> None:
                          "table is then of that identification (0: not)")
     ap.add_argument("--window", type=float, help="smoothing window, s (default: calibrate's)")
     ap.add_argument("--polyorder", type=int, help="smoothing order (default: calibrate's)")
+    ap.add_argument("--angle-noise", action="store_true",
+                    help="identify with the angles' errors-in-variables correction")
     args = ap.parse_args()
-    smoothing = {k: v for k, v in (("window_s", args.window), ("polyorder", args.polyorder))
+    smoothing = {k: v for k, v in (("window_s", args.window), ("polyorder", args.polyorder),
+                                   ("position_noise", args.angle_noise or None))
                  if v is not None}
     if smoothing:
         print(f"smoothing: {smoothing}")

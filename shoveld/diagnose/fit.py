@@ -35,10 +35,11 @@ class DiagCalibrator(Calibrator):
     """The project's ``Calibrator``, fed the diagnosis's prepared data for a fold."""
 
     def __init__(self, model: Model, dataset: DataSet, train: set[int] | None,
-                 method: str = "output", angle_drift_deg: float = ANGLE_DRIFT_DEG) -> None:
+                 method: str = "output", angle_drift_deg: float = ANGLE_DRIFT_DEG,
+                 position_noise: bool = False) -> None:
         super().__init__(model=model, method=method, exclusion=dataset.exclusion,
                          window_s=dataset.window_s, polyorder=dataset.polyorder,
-                         angle_drift_deg=angle_drift_deg)
+                         angle_drift_deg=angle_drift_deg, position_noise=position_noise)
         self.dataset = dataset
         self.train = train
 
@@ -50,8 +51,8 @@ def calibrate_with_verified(model: Model, trials: list[SignalsTable],
                             verified: list[SignalsTable], method: str = "output",
                             window_s: float = DEFAULT_WINDOW_S,
                             polyorder: int = DEFAULT_POLYORDER,
-                            angle_drift_deg: float = ANGLE_DRIFT_DEG
-                            ) -> tuple[Calibrator, int, int]:
+                            angle_drift_deg: float = ANGLE_DRIFT_DEG,
+                            position_noise: bool = False) -> tuple[Calibrator, int, int]:
     """Identify ``model`` on the trials plus every scale-verified pass of the ``verified``
     tables (``shoveld calibrate --verified``): the passes bring a full dipper's currents,
     which the trials lack. Returns the fitted calibrator, the verified passes used and
@@ -61,7 +62,8 @@ def calibrate_with_verified(model: Model, trials: list[SignalsTable],
     if not train:
         raise ValueError("no pass with a verified payload (the payload_kg column must hold "
                          "the weighed payload through each verified pass)")
-    cal = DiagCalibrator(model, ds, train, method, angle_drift_deg).fit(ds.calib)
+    cal = DiagCalibrator(model, ds, train, method, angle_drift_deg,
+                         position_noise).fit(ds.calib)
     return cal, len(train), len(ds.passes)
 
 
