@@ -183,8 +183,8 @@ class MtiSerialDriver(Driver):
         """(packet counter, sample time fine, euler, status word) of the last full frame
         seen."""
         self._ids = frozenset(x for x, _ in self.requested_outputs())
-        """The identifiers the device is configured to send (``open`` checks that it
-        acknowledged exactly these), precision and frame bits included."""
+        """The identifiers the device sends, precision and frame bits included: those
+        requested, then (``open``) those it acknowledged, which include them."""
         self._last_valid = 0.0
         self.health.extra.setdefault("dropped_packets", 0)
         self.health.extra.setdefault("inconsistent_frames", 0)
@@ -338,6 +338,7 @@ class MtiSerialDriver(Driver):
                 log.warning("%s: MTi set %s to %s Hz instead of %s Hz", self.name,
                             item_label(x), got[x], f)
         self.output_configuration = sorted(got.items())
+        self._ids = frozenset(x for x, f in got.items() if f)  # what it will send
         self.health.extra["output_rate_hz"] = got[wanted[2][0]]
         self._command(MID.GOTO_MEASUREMENT, b"", MID.GOTO_MEASUREMENT_ACK)
         self._prev_counter = None
