@@ -15,8 +15,8 @@ from __future__ import annotations
 import math
 import struct
 import sys
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import pytest
 
@@ -142,7 +142,7 @@ def _f32(v: float) -> bytes:
     return struct.pack(">f", v)
 
 
-CORRUPTIONS: dict[str, Any] = {
+CORRUPTIONS: dict[str, Callable[[bytes], bytes]] = {
     # a status byte hit: bit 29 (reserved) or the self-test bit
     "reserved status bit": lambda p: _replace(p, XDI.STATUS_WORD, b"\x20\x00\x00\x03"),
     "self-test bit": lambda p: _replace(p, XDI.STATUS_WORD, b"\x00\x00\x00\x02"),
