@@ -7,18 +7,21 @@ Per parser it counts:
 * corruptions accepted: for the MTi (Xbus), a frame corrupted in 1-4 bytes whose
   reading reaches the loop with values that differ from the clean frame's. The Xbus
   checksum is one byte, so about 1 in 256 such frames pass it: the driver stops them
-  with what the frame already carries (the configured items, Euler angles that agree
-  with the packet's quaternion, the packet counter and sample time advancing together,
-  values in range, angles that cannot jump). ``xbus`` is the MTi sending both
-  orientations (the default), ``xbus-euler`` Euler angles alone (as before 2026-11-26).
-  What still gets through is a change in the rate of turn, the acceleration or the
-  status word (which the loop does not use) or in an angle's low bits; the bench also
-  counts those that move an angle by more than 0.01 deg. The AR4000's ASCII protocol has no
+  with what the frame already carries (the configured items with their exact
+  identifiers, Euler angles that agree with the packet's quaternion, the packet counter
+  and sample time advancing together, values finite, in range and not next to zero, the
+  status word's undefined bits clear and its self-test bit steady, angles that cannot
+  jump). ``xbus`` is the MTi sending both orientations (the default), ``xbus-euler``
+  Euler angles alone (as before 2026-11-26). What still gets through is a change in the
+  rate of turn, the acceleration or the status word (which the loop does not use) or in
+  an angle's low bits; the bench also counts those that move an angle by more than
+  0.01 deg, and ``--breakdown`` prints which field and which bits each accepted reading
+  differs in, and how many differ only within the sensor's noise. The AR4000's ASCII protocol has no
   checksum at all, so a mutated digit is a valid distance: its count is printed for
   what it is.
 
     .venv/bin/python bench/fuzz.py [--parser all|xbus|xbus-euler|ar4000|modbus|table|capture]
-                                   [--n 1000000] [--seed 1]
+                                   [--n 1000000] [--seed 1] [--breakdown]
 
 Goal (issue 12): 0 crashes, 0 hangs, 0 corrupted MTi frames accepted.
 """
@@ -91,12 +94,13 @@ class Tally:
 ANGLES = ("roll_deg", "pitch_deg", "yaw_deg")
 
 
-def fuzz_xbus(n: int, rng: random.Random, t: Tally, orientation: str = "euler+quaternion"
-              ) -> None:
+def fuzz_xbus(n: int, rng: random.Random, t: Tally, orientation: str = "euler+quaternion",
+              breakdown: list[list[tuple[str, float, float]]] | None = None) -> None:
     """Corrupt one MTData2 frame between two clean ones; parse and decode as the driver
     configured for ``orientation``. The committed capture's MTi sent Euler angles alone;
     for the default (both) each of its packets gets the quaternion of its own Euler
-    angles, as the emulator and a real device send it."""
+    angles, as the emulator and a real device send it. ``breakdown`` collects, per
+    accepted reading, (key, clean value, value read) of each value that differs."""
     from drivers.base import Reading
     from drivers.xsens.mtdata2 import XDI, encode_item, mtdata2_values
     from drivers.xsens.orientation import euler_deg_to_quat
@@ -145,12 +149,82 @@ def fuzz_xbus(n: int, rng: random.Random, t: Tally, orientation: str = "euler+qu
                                for key, v in r.values.items())
                            for c in (clean[k - 1], clean[k], clean[k + 1])):
                     t.accepted += 1
+                    if breakdown is not None:
+                        breakdown.append([(key, clean[k][key], v)
+                                          for key, v in r.values.items()
+                                          if not (key in clean[k] and v == clean[k][key])])
                     # what the loop turns into joint angles, off by more than the sensor
                     # resolves (0.01 deg)
                     if any(abs(r.values[a] - c[a]) > 0.01 for a in ANGLES if a in r.values
                            for c in (clean[k],)):
                         t.severe += 1
         t.run(one, ())
+
+
+def float32_bits(old: float, new: float) -> str:
+    """Which part of a float32 a change hit: its highest differing bit, named."""
+    import struct
+
+    x = struct.unpack(">I", struct.pack(">f", old))[0] ^ struct.unpack(
+        ">I", struct.pack(">f", new))[0]
+    top = x.bit_length() - 1
+    if top == 31:
+        return "sign"
+    if top >= 23:
+        return "exponent"
+    return f"mantissa bit {top}" if top >= 16 else "mantissa bits 0-15"
+
+
+NOISE = {"gyr": 0.0013, "acc": 0.0068, "deg": 0.005}
+"""What a change must exceed to be told from the sensor's own noise: one standard
+deviation of a real MTi-G-710 at rest, sample to sample at 100 Hz (fixtures
+``xsens-mti-g710/1`` and ``/3``: rate of turn 0.0013-0.0020 rad/s, acceleration
+0.0068-0.0085 m/s^2, the smallest of each); for an angle the 0.005 deg its Euler angles
+and quaternion may disagree by (its angles move 0.003-0.03 deg rms sample to sample)."""
+
+
+def _noise(key: str) -> float:
+    return NOISE[key[:3]] if key[:3] in NOISE else NOISE["deg"] if key.endswith("_deg") else 0.0
+
+
+def print_breakdown(readings: list[list[tuple[str, float, float]]], accepted: int) -> None:
+    """What the accepted readings differ in: per field, by the part of the float32 hit,
+    with the largest absolute and relative change and how many changes stay within the
+    sensor's noise (:data:`NOISE`); then the readings whose every change does."""
+    from collections import defaultdict
+
+    groups: dict[tuple[str, str], list[tuple[float, float]]] = defaultdict(list)
+    rows = [row for r in readings for row in r]
+    for key, old, new in rows:
+        if key in ("packet_counter", "sample_time_fine", "status_word"):
+            x = int(old) ^ int(new)
+            part = "bits " + ",".join(f"{8 * h}-{8 * h + 7}" for h in sorted(
+                {b // 8 for b in range(32) if x >> b & 1}))
+        else:
+            part = float32_bits(old, new) if math.isfinite(new) else "non-finite"
+        groups[(key, part)].append((old, new))
+    print(f"  breakdown of the {accepted} accepted ({len(rows)} values differ):")
+    print(f"    {'field':<17s} {'part hit':<20s} {'n':>5s} {'max |change|':>13s} "
+          f"{'max rel':>9s} {'in noise':>8s}")
+    for (key, part), vals in sorted(groups.items(), key=lambda kv: (kv[0][0], -len(kv[1]))):
+        d = max(abs(b - a) for a, b in vals)
+        rel = max(abs(b - a) / abs(a) if a else math.inf for a, b in vals)
+        quiet = sum(abs(b - a) <= _noise(key) for a, b in vals)
+        print(f"    {key:<17s} {part:<20s} {len(vals):5d} {d:13.4g} {rel:9.2g} {quiet:8d}")
+    quiet_r = [r for r in readings if all(abs(b - a) <= _noise(k) for k, a, b in r)]
+    big: dict[str, float] = defaultdict(float)
+    for r in quiet_r:
+        for k, a, b in r:
+            big[k] = max(big[k], abs(b - a))
+    print(f"  of the {len(readings)}, every change within the sensor's noise: {len(quiet_r)} "
+          "(largest: " + ", ".join(f"{k} {v:.2g}" for k, v in sorted(big.items())) + ")")
+    fields: dict[str, int] = defaultdict(int)
+    for r in readings:
+        if r not in quiet_r:
+            loud = sorted({k for k, a, b in r if abs(b - a) > _noise(k)})
+            fields[" + ".join(loud)] += 1
+    print("  beyond the noise, by field: " + ", ".join(
+        f"{k} {n}" for k, n in sorted(fields.items(), key=lambda kv: -kv[1])))
 
 
 def fuzz_ar4000(n: int, rng: random.Random, t: Tally) -> None:
@@ -241,6 +315,8 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=1_000_000)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--hang-s", type=float, default=1.0)
+    ap.add_argument("--breakdown", action="store_true",
+                    help="MTi: what each accepted reading differs in (field, bits, size)")
     args = ap.parse_args()
     logging.disable(logging.WARNING)  # (a torn last line is warned about, by design)
     names = PARSERS if args.parser == "all" else (args.parser,)
@@ -251,7 +327,9 @@ def main() -> None:
         t = Tally(name, args.hang_s)
         t0 = time.perf_counter()
         if name.startswith("xbus"):
-            fuzz_xbus(args.n, rng, t, "euler" if name == "xbus-euler" else "euler+quaternion")
+            rows: list[list[tuple[str, float, float]]] | None = [] if args.breakdown else None
+            fuzz_xbus(args.n, rng, t, "euler" if name == "xbus-euler" else "euler+quaternion",
+                      rows)
             note = ("readings from corrupted frames that reached the loop; 'of': corrupted "
                     "frames that passed the checksum; MTi sending "
                     + ("Euler angles alone" if name == "xbus-euler"
@@ -271,6 +349,8 @@ def main() -> None:
               f"{t.checked:8d} {dt:6.0f}  {note}", flush=True)
         if name.startswith("xbus"):
             print(f"  of the accepted, with an angle off by more than 0.01 deg: {t.severe}")
+            if rows is not None:
+                print_breakdown(rows, t.accepted)
         if t.first_crash:
             print(f"  first crash: {t.first_crash}", file=sys.stderr)
 

@@ -74,6 +74,11 @@ class FrameLayout:
         if end < len(payload):  # a truncated tail: every byte of it must match
             structure[head + end:-1] = True
         self.repeated = {k for k, n in seen.items() if n > 1}
+        xdis = [xdi for xdi, _, _ in iter_packets(payload)]
+        self.ids = (frozenset(xdis) if len(set(xdis)) == len(xdis) and end == len(payload)
+                    else None)
+        """The packets' full identifiers, as :func:`~drivers.xsens.mtdata2.mtdata2_values_ids`
+        gives them for every frame with these header bytes."""
         self.structure = np.flatnonzero(structure)
         self.template = frame[self.structure].copy()
 

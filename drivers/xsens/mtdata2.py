@@ -337,7 +337,7 @@ class _Layout:
     so decoding is two C-level ``unpack_from`` calls plus a short loop per message.
     """
 
-    __slots__ = ("heads", "expect", "data", "slots", "values_plan")
+    __slots__ = ("heads", "expect", "data", "slots", "values_plan", "ids")
 
     def __init__(self, payload: bytes | memoryview) -> None:
         packets = list(iter_packets(payload))
@@ -370,6 +370,12 @@ class _Layout:
                                  for xdi, _n, conv, _p, _f, a, b in self.slots
                                  if conv != "bytes")
         """:func:`mtdata2_values`' steps: (key, how, conversion, first, end) per packet."""
+        xdis = [xdi for xdi, *_ in self.slots]
+        self.ids: frozenset[int] | None = (frozenset(xdis) if len(set(xdis)) == len(xdis)
+                                           and not tail else None)
+        """The packets' full identifiers (precision and frame bits too), or None if one
+        repeats or bytes are left over: what :func:`mtdata2_values_ids` gives a driver to
+        check its frames by."""
 
 
 _SLICE, _ONE, _CONVERT = 0, 1, 2
@@ -415,6 +421,24 @@ def mtdata2_values(payload: bytes | memoryview) -> dict[int, Any]:
         else:
             out[key] = _convert(conv, vals, a, b)
     return out
+
+
+def mtdata2_values_ids(payload: bytes | memoryview
+                       ) -> tuple[dict[int, Any], frozenset[int] | None]:
+    """:func:`mtdata2_values` and the payload's full packet identifiers (None if one
+    repeats), from one layout look-up: a device sends exactly the identifiers it was
+    configured with, so a frame whose identifier bytes were hit shows here."""
+    lay = _layout(payload)
+    vals = lay.data.unpack_from(payload)
+    out: dict[int, Any] = {}
+    for key, how, conv, a, b in lay.values_plan:
+        if how == _SLICE:
+            out[key] = vals[a:b]
+        elif how == _ONE:
+            out[key] = vals[a]
+        else:
+            out[key] = _convert(conv, vals, a, b)
+    return out, lay.ids
 
 
 def encode_item(xdi: int, value: Any) -> bytes:

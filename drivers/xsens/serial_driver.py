@@ -52,7 +52,7 @@ from drivers.xsens.mtdata2 import (
     encode_output_configuration,
     item_label,
     item_size,
-    mtdata2_values,
+    mtdata2_values_ids,
 )
 from drivers.xsens.orientation import euler_deg_to_quat, quat_to_euler_deg
 from drivers.xsens.xbus import MID, MID_NAMES, XbusMessage, XbusParser, describe_error, encode_frame
@@ -79,6 +79,34 @@ both come from the device's one orientation, so only rounding separates them (ab
 the 0.01 deg the loop's angles resolve."""
 SAMPLE_TIME_FINE_S = 1e-4
 """SampleTimeFine counts a 10 kHz clock (MTi documentation; CAN 'SampleTime' note)."""
+GYR_MAX = 35.0
+"""rad/s: above 2000 deg/s (34.9 rad/s), the widest gyroscope range of the MTi family
+(MTi 1-series datasheet MT0512P and MTi 600-series datasheet MT1603P: +-2000 deg/s; MTi
+10/100-series, MT0605P: +-450 deg/s; MTx: +-1200 deg/s). A model's own range is not
+used: the device id does not tell it for every model."""
+ACC_MAX = 200.0
+"""m/s^2: above the widest accelerometer range found in the MTi documents (+-180 m/s^2,
+the 18 g option of the MTi/MTx, MT0100P; +-16 g on the MTi 1-series; +-10 g on the
+600-series)."""
+TINY = 1e-20
+"""No measured value lies this close to zero without being zero: each carries the
+sensor's noise (a real MTi-G-710 at rest: 0.0013 rad/s, 0.007 m/s^2, 0.001 deg sample
+to sample; its smallest magnitudes in 300 packets, fixture ``xsens-mti-g710``, are
+8.6e-6 rad/s and 4e-8 in a DeltaQ), so one lands inside 1e-20 with a chance of about
+1e-17, once in 10^6 years of packets; fixed point outputs step by 2^-32 at the finest.
+What lands there is a float whose exponent byte was hit: 0.0 turned into 1e-40, a
+rate of 0.04 into 3e-25."""
+STATUS_RESERVED = 0xE0020000
+"""StatusWord bits no Xsens document defines: 17 and 29-31. The SDK's
+``XsStatusFlag`` (xsstatusflag.h, 2021) names bits 0-16 and 18-28 (selftest, filter
+valid, GNSS fix, no-rotation, clip flags, clipping, sync in/out, filter mode, GNSS
+time pulse, RTK status); the MTi user manual (MT0605P, 'Status byte') bits 0-16 and
+19-25, and Xsens' ROS driver's ``XsStatusWord`` message marks 17-18, 20 and 29-31
+reserved. A device sends them clear; a corrupted status byte mostly sets one."""
+STATUS_SELFTEST = 0x1
+"""StatusWord bit 0: the device passed its latest self-test (RunSelftest, a Config
+state command, or at power-up): it cannot change between two packets of one
+measurement."""
 
 
 def firmware_text(data: bytes) -> str:
@@ -151,8 +179,12 @@ class MtiSerialDriver(Driver):
         self._parser = XbusParser()
         self._counted = (0, 0)
         self._prev_counter: int | None = None
-        self._prev_frame: tuple[int, int, tuple[float, float, float]] | None = None
-        """(packet counter, sample time fine, euler) of the last full frame seen."""
+        self._prev_frame: tuple[int, int, tuple[float, float, float], int] | None = None
+        """(packet counter, sample time fine, euler, status word) of the last full frame
+        seen."""
+        self._ids = frozenset(x for x, _ in self.requested_outputs())
+        """The identifiers the device sends, precision and frame bits included: those
+        requested, then (``open``) those it acknowledged, which include them."""
         self._last_valid = 0.0
         self.health.extra.setdefault("dropped_packets", 0)
         self.health.extra.setdefault("inconsistent_frames", 0)
@@ -306,6 +338,7 @@ class MtiSerialDriver(Driver):
                 log.warning("%s: MTi set %s to %s Hz instead of %s Hz", self.name,
                             item_label(x), got[x], f)
         self.output_configuration = sorted(got.items())
+        self._ids = frozenset(x for x, f in got.items() if f)  # what it will send
         self.health.extra["output_rate_hz"] = got[wanted[2][0]]
         self._command(MID.GOTO_MEASUREMENT, b"", MID.GOTO_MEASUREMENT_ACK)
         self._prev_counter = None
@@ -338,7 +371,7 @@ class MtiSerialDriver(Driver):
     def decode(self, payload: bytes) -> Reading | None:
         """One MTData2 payload -> Reading (quantities the packet lacks are marked invalid)."""
         t_host = self.clock()
-        items = mtdata2_values(payload)
+        items, ids = mtdata2_values_ids(payload)
         get = items.get
         e, g, acc = get(_EULER), get(_RATE_OF_TURN), get(_ACCELERATION)
         pc, stf, sw = get(_PACKET_COUNTER), get(_SAMPLE_TIME_FINE), get(_STATUS_WORD)
@@ -346,7 +379,12 @@ class MtiSerialDriver(Driver):
         if (e is not None and g is not None and acc is not None and pc is not None
                 and stf is not None and sw is not None  # the configured packet: all there
                 and (q is not None or not self._redundant)):
-            if not self._consistent(pc, stf, e, g, acc, q):
+            if ids is None or not ids <= self._ids:
+                # not the configured packet: an identifier byte was hit (a precision or
+                # frame bit decodes the same bytes another way, or in another frame)
+                self._inconsistent()
+                return None
+            if not self._consistent(pc, stf, e, g, acc, q, sw):
                 return None
             self._count_gap(pc)
             return Reading(self.name, t_host, {
@@ -393,22 +431,31 @@ class MtiSerialDriver(Driver):
     """Packets a frame may follow the previous one by (dropped ones in between)."""
 
     def _consistent(self, pc: int, stf: int, e: tuple[float, ...], g: tuple[float, ...],
-                    acc: tuple[float, ...], q: tuple[float, ...] | None = None) -> bool:
+                    acc: tuple[float, ...], q: tuple[float, ...] | None = None,
+                    sw: int = 0) -> bool:
         """Does the frame agree with itself and with the one before? The Xbus checksum is
         one byte, so about 1 in 256 corrupted frames pass it; what the frame carries
         catches them: the Euler angles and the quaternion (when both are sent) must be
         one orientation, the packet counter and the 10 kHz sample time must advance
-        together, the values must be in the sensor's range, and the angles cannot jump
+        together, the values must be finite, in the sensor's range (:data:`GYR_MAX`,
+        :data:`ACC_MAX`) and not next to zero (:data:`TINY`), the status word's reserved
+        bits clear and its self-test bit unchanged, and the angles cannot jump
         further than the measured rate of turn allows (with 2 deg of slack: a real
         MTi-G-710's filter corrects its angles in steps of up to 0.4 deg, fixture
         ``xsens-mti-g710``). A frame that fails is counted and dropped; it still becomes
-        the reference, so after a real reset of the device one frame is lost, not all."""
-        prev, self._prev_frame = self._prev_frame, (pc, stf, (e[0], e[1], e[2]))
+        the reference, so after a real reset of the device one frame is lost, not all.
+        :func:`drivers.xsens.serial_span.consistent` is this rule on columns."""
+        prev, self._prev_frame = self._prev_frame, (pc, stf, (e[0], e[1], e[2]), sw)
+        # (a NaN fails every comparison, so each bound is written to hold, not to fail)
         if not (abs(e[0]) <= 180.0 and abs(e[1]) <= 90.0 and abs(e[2]) <= 180.0
-                and max(abs(g[0]), abs(g[1]), abs(g[2])) <= 35.0  # 2000 deg/s
-                and max(abs(acc[0]), abs(acc[1]), abs(acc[2])) <= 200.0):
+                and abs(g[0]) <= GYR_MAX and abs(g[1]) <= GYR_MAX and abs(g[2]) <= GYR_MAX
+                and abs(acc[0]) <= ACC_MAX and abs(acc[1]) <= ACC_MAX
+                and abs(acc[2]) <= ACC_MAX and not sw & STATUS_RESERVED):
             return self._inconsistent()
-        if q is not None and not orientations_agree(e, q):
+        for v in (e, g, acc) if q is None else (e, g, acc, q):
+            if 0.0 < abs(v[0]) < TINY or 0.0 < abs(v[1]) < TINY or 0.0 < abs(v[2]) < TINY:
+                return self._inconsistent()
+        if q is not None and (0.0 < abs(q[3]) < TINY or not orientations_agree(e, q)):
             return self._inconsistent()
         if prev is None:
             return True
@@ -417,7 +464,8 @@ class MtiSerialDriver(Driver):
         rate = float(self.health.extra.get("output_rate_hz") or self.rate_hz)
         # the sample time counts a 10 kHz clock and the output rates divide it: packets
         # n apart are n/rate apart to the tick (1.5 ticks for the rounding of odd rates)
-        if not 1 <= n <= self.MAX_GAP or abs(dt - n / rate) > 1.5 * SAMPLE_TIME_FINE_S:
+        if (not 1 <= n <= self.MAX_GAP or abs(dt - n / rate) > 1.5 * SAMPLE_TIME_FINE_S
+                or (sw ^ prev[3]) & STATUS_SELFTEST):
             return self._inconsistent()
         # 2 deg of slack, plus three times what the fastest measured rate could turn
         limit = 2.0 + 3.0 * 57.3 * max(abs(g[0]), abs(g[1]), abs(g[2])) * dt

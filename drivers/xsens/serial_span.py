@@ -8,8 +8,8 @@ the driver's own rules applied on the columns - :func:`consistent` for
 ``MtiSerialDriver._consistent``, the packet-counter gaps, the data timeout, the health
 counters - with the driver's state (parser buffer, previous frame, counters) left as
 the reads would leave it. It stops before the first tick where anything else could
-happen (noise, a bad checksum, another message, a frame it would emit with a
-non-finite value, a timeout); the per-tick ``read`` takes over there.
+happen (noise, a bad checksum, another message, a frame of another layout, a
+timeout); the per-tick ``read`` takes over there.
 """
 
 from __future__ import annotations
@@ -26,8 +26,13 @@ from drivers.spanio import RecordedStream, SpanResult
 from drivers.xsens.bulk import KEYS, FrameLayout, Run, clean_run
 from drivers.xsens.mtdata2 import XDI
 from drivers.xsens.serial_driver import (
+    ACC_MAX,
     AGREEMENT_DEG,
+    GYR_MAX,
     SAMPLE_TIME_FINE_S,
+    STATUS_RESERVED,
+    STATUS_SELFTEST,
+    TINY,
     VALUE_KEYS,
     MtiSerialDriver,
     orientations_agree,
@@ -49,26 +54,34 @@ def _pymax3(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
 
 def consistent(e: np.ndarray, g: np.ndarray, acc: np.ndarray, q: np.ndarray | None,
                pc: np.ndarray, stf: np.ndarray, prev: tuple[Any, ...] | None, rate: float,
-               max_gap: int) -> np.ndarray:
+               max_gap: int, sw: np.ndarray | None = None) -> np.ndarray:
     """``MtiSerialDriver._consistent`` of consecutive frames (each one's previous frame is
-    the row before; the first one's is ``prev``), the same operations in the same order."""
-    gmax = _pymax3(np.abs(g[:, 0]), np.abs(g[:, 1]), np.abs(g[:, 2]))
-    amax = _pymax3(np.abs(acc[:, 0]), np.abs(acc[:, 1]), np.abs(acc[:, 2]))
+    the row before; the first one's is ``prev``), the same rules in the same order.
+    ``sw`` (the status words) defaults to all zero."""
+    n = len(pc)
+    if sw is None:
+        sw = np.zeros(n, np.int64)
     ok = ((np.abs(e[:, 0]) <= 180.0) & (np.abs(e[:, 1]) <= 90.0) & (np.abs(e[:, 2]) <= 180.0)
-          & (gmax <= 35.0) & (amax <= 200.0))
+          & (np.abs(g) <= GYR_MAX).all(axis=1) & (np.abs(acc) <= ACC_MAX).all(axis=1)
+          & ((sw & STATUS_RESERVED) == 0))
+    for v in (e, g, acc) if q is None else (e, g, acc, q):
+        a = np.abs(v)
+        ok &= ~((a > 0.0) & (a < TINY)).any(axis=1)
     if q is not None:
         ok &= _agree(e, q)
-    n = len(pc)
     if n == 0:
         return ok
+    gmax = _pymax3(np.abs(g[:, 0]), np.abs(g[:, 1]), np.abs(g[:, 2]))
     ppc, pstf, pe = np.empty(n, np.int64), np.empty(n, np.int64), np.empty((n, 3))
-    ppc[1:], pstf[1:], pe[1:] = pc[:-1], stf[:-1], e[:-1]
+    psw = np.empty(n, np.int64)
+    ppc[1:], pstf[1:], pe[1:], psw[1:] = pc[:-1], stf[:-1], e[:-1], sw[:-1]
     if prev is not None:
-        ppc[0], pstf[0], pe[0] = prev[0], prev[1], prev[2]
+        ppc[0], pstf[0], pe[0], psw[0] = prev[0], prev[1], prev[2], prev[3]
     steps = (pc - ppc) & 0xFFFF
     dt = ((stf - pstf) & 0xFFFFFFFF) * SAMPLE_TIME_FINE_S
-    chain = (1 <= steps) & (steps <= max_gap) & ~(np.abs(dt - steps / rate)
-                                                  > 1.5 * SAMPLE_TIME_FINE_S)
+    chain = ((1 <= steps) & (steps <= max_gap)
+             & ~(np.abs(dt - steps / rate) > 1.5 * SAMPLE_TIME_FINE_S)
+             & (((sw ^ psw) & STATUS_SELFTEST) == 0))
     limit = 2.0 + 3.0 * 57.3 * gmax * dt
     for a in range(3):
         chain &= ~(np.abs(np.remainder(e[:, a] - pe[:, a] + 180.0, 360.0) - 180.0) > limit)
@@ -151,8 +164,9 @@ class MtiSpanReader:
         if run is None:
             return None
         fields = run.layout.fields_of(KEYS + ((XDI.QUATERNION,) if d._redundant else ()))
-        if fields is None:
-            return None
+        ids = run.layout.ids
+        if fields is None or ids is None or not ids <= d._ids:
+            return None  # not the configured packet: the per-tick read drops it
         rows, length = run.rows, run.layout.length
         cols = {k: FrameLayout.column(rows, f) for k, f in fields.items()}
         e, g, acc = cols[XDI.EULER_ANGLES], cols[XDI.RATE_OF_TURN], cols[XDI.ACCELERATION]
@@ -160,12 +174,8 @@ class MtiSpanReader:
                        cols[XDI.STATUS_WORD])
         rate = float(d.health.extra.get("output_rate_hz") or d.rate_hz)
         ok = consistent(e, g, acc, cols.get(XDI.QUATERNION), pc, stf, d._prev_frame, rate,
-                        d.MAX_GAP)
-        # a frame it would emit with a NaN or an infinity: the per-tick read handles it
-        finite = np.isfinite(g).all(axis=1) & np.isfinite(acc).all(axis=1)
-        bad = np.flatnonzero(ok & ~finite)
-        clean_end = run.clean_end if not len(bad) else int(bad[0]) * length
-        nt = int(np.searchsorted(rel.ends, clean_end, side="right"))  # ticks inside clean bytes
+                        d.MAX_GAP, sw)
+        nt = int(np.searchsorted(rel.ends, run.clean_end, side="right"))  # in clean bytes
         ends = (np.arange(len(rows)) + 1) * length
         arrive = np.searchsorted(rel.ends, ends, side="left")  # tick index of each frame
         # the data timeout: a tick whose read finds no frame for data_timeout_s raises
@@ -208,7 +218,8 @@ class MtiSpanReader:
             gaps[gaps >= 0x8000] = 0
             d._prev_counter = int(counters[-1])
         if nf:
-            d._prev_frame = (int(pc[nf - 1]), int(stf[nf - 1]), tuple(e[nf - 1].tolist()))
+            d._prev_frame = (int(pc[nf - 1]), int(stf[nf - 1]), tuple(e[nf - 1].tolist()),
+                             int(sw[nf - 1]))
         em_tick = arrive[em]
         per_tick = {"messages": np.bincount(em_tick, minlength=nt)[:nt],
                     "bad_frames": np.bincount(arrive[~ok], minlength=nt)[:nt],

@@ -61,6 +61,8 @@ def test_configuration_sequence_and_identity(emu: MtiEmulator) -> None:
         assert sorted(emu.outputs) == sorted(drv.requested_outputs())
         assert dict(emu.outputs)[XDI.EULER_ANGLES] == 100
         assert dict(emu.outputs)[XDI.PACKET_COUNTER] == MAX_FREQUENCY
+        # the identifiers its frames are checked against: those it acknowledged
+        assert drv._ids == frozenset(x for x, _ in emu.outputs)
         assert drv.health.extra["device_id"] == "06301234"
         assert drv.health.extra["firmware"] == "1.8.2 build 37 rev 70964"
     finally:

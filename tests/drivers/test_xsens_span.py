@@ -110,10 +110,17 @@ def damage(data: bytearray, fs: list[int], lay: FrameLayout) -> bytearray:
     n = lay.length
     data[fs[3] + 9] ^= 0x40  # a bit error: bad checksum
     _put(data, fs[8], lay, XDI.EULER_ANGLES, b"\x43", at=4)  # pitch far off, checksum good
-    _put(data, fs[12], lay, XDI.EULER_ANGLES, b"\x01", at=3)  # roll a hair off: passes
+    _put(data, fs[12], lay, XDI.EULER_ANGLES, b"\x01", at=7)  # pitch a hair off: passes
     _put(data, fs[15], lay, XDI.RATE_OF_TURN, b"\x7f\xc0\x00\x00", at=4)  # NaN gyr_y
     _put(data, fs[18], lay, XDI.ACCELERATION, b"\x7f\x80\x00\x00", at=0)  # inf acc_x
     _put(data, fs[21], lay, XDI.PACKET_COUNTER, b"\x00\x00")  # counter jumps back
+    _put(data, fs[48], lay, XDI.STATUS_WORD, b"\x20")  # a reserved status bit
+    _put(data, fs[50], lay, XDI.STATUS_WORD, b"\x02", at=3)  # the self-test bit drops
+    _put(data, fs[52], lay, XDI.RATE_OF_TURN, b"\x18", at=8)  # a rate to ~1e-24
+    head = f = fs[55]  # an identifier hit: the Euler angles' frame bits say NED
+    head += lay.fields[XDI.EULER_ANGLES].offset - 2
+    data[head] |= 0x04
+    _resum(data, f, n)
     data[fs[27]:fs[27]] = encode_frame(MID.ERROR, b"\x29")  # a device error message
     del data[fs[24] + n - 6:fs[24] + n]  # a truncated frame
     del data[fs[30]:fs[33]]  # three frames lost
@@ -153,7 +160,7 @@ def test_span_reads_match_per_tick_reads_on_the_capture(window: int) -> None:
     assert h["bad_frames"] >= 10 and h["rejected_bytes"] > 0 and h["timeouts"] == 1
     assert h["reconnects"] == 1 and h["dropped_packets"] >= 3
     assert h["device_errors"] == 2
-    assert any(r[3] for r in a[0])  # the NaN gyro: a reading with an invalid quantity
+    assert not any(r[3] for r in a[0])  # the NaN gyro's frame is dropped, not half-read
     assert a[0] == b[0]
     assert a[1] == b[1]
     assert a[2] == b[2]
@@ -258,18 +265,29 @@ def test_consistency_rule_on_columns_is_the_drivers() -> None:
     g[::53, 2] = 40.0
     acc = rng.normal(0, 20, (n, 3))
     acc[::61, 0] = 250.0
+    g[::71, 0] = 1e-40  # next to zero
+    g[::73, 1] = -3e-25
+    acc[::89, 2] = -3e-39
+    acc[::97, 1] = 0.0  # zero is not next to zero
+    acc[::79, 0] = 2e-20  # (nor is this)
     noise = rng.normal(0, 3e-8, (n, 4))
     noise[::5] *= 1500.0  # about the agreement limit
     q = np.array([_quat(*row) for row in e]) + noise
     pc = np.cumsum(rng.choice([1] * 20 + [2, 60], n)).astype(np.int64) & 0xFFFF
     stf = (np.cumsum(np.diff(pc, prepend=0) * 100 + rng.choice([0] * 30 + [1, 2], n))
            + 2**32 - 5000) & 0xFFFFFFFF
+    sw = np.full(n, 3, np.int64)
+    sw[::43] |= 1 << 29  # reserved
+    sw[::59] |= 1 << 17
+    sw[::67] ^= 1  # the self-test bit flips
+    sw[::101] |= 0x1800040  # defined bits come and go
     drv = MtiSerialDriver(orientation="euler+quaternion", clock=StepClock())
     drv.health.extra["output_rate_hz"] = 100
     want = [drv._consistent(int(pc[i]), int(stf[i]), tuple(e[i].tolist()),
-                            tuple(g[i].tolist()), tuple(acc[i].tolist()), tuple(q[i].tolist()))
+                            tuple(g[i].tolist()), tuple(acc[i].tolist()), tuple(q[i].tolist()),
+                            int(sw[i]))
             for i in range(n)]
-    got = consistent(e, g, acc, q, pc, stf, None, 100.0, drv.MAX_GAP)
+    got = consistent(e, g, acc, q, pc, stf, None, 100.0, drv.MAX_GAP, sw)
     assert got.tolist() == want
     assert 0.1 < float(np.mean(want)) < 0.9
 
