@@ -294,7 +294,9 @@ class Calibrator:
     variables, :func:`position_noise_errors`). Off by default: over 120 simulated
     machines it cut K_C's bias from +0.51 to +0.33 standard errors but moved J's from
     -0.38 to +0.31 (+0.55 on the tests' 20 machines) and the 60 A field knot's to -0.54
-    there (docs/engine.md)."""
+    there. J's lean is the smoothing's own bias, which the noise hid: with a 7th-order
+    fit over 1.15 s as well, J +0.11 and every bias under 0.37 over 120 machines, but
+    the 60 A knot at -0.52 on the tests' machines (docs/engine.md, "What moved J")."""
     files_: list[FileData] = field(default_factory=list, init=False)
     params_: ModelParams | None = field(default=None, init=False)
     output_fit_: output_error.OutputFit | None = field(default=None, init=False)
