@@ -360,7 +360,7 @@ class HoistDrive(Term):
             return last[1]
         if len(self.knots) == 1:
             out = np.ones((len(k), 1))
-        elif len(k) <= BLOCK_ROWS:
+        elif 0 < len(k) <= BLOCK_ROWS:
             out = self._block_basis(k.i_hf)
         else:
             out = self._field_basis(k.i_hf)
@@ -368,6 +368,7 @@ class HoistDrive(Term):
         return out
 
     def _field_basis(self, i_f: np.ndarray) -> np.ndarray:
+        """The curve's weights at ``i_f``, evaluated (this term's curve settings)."""
         return field_basis(i_f, self.knots, self.above == "slope", self.below == "slope",
                            self.ends)
 
@@ -379,6 +380,7 @@ class HoistDrive(Term):
         depends only on its reading: the same weights. Not kept: NaN and infinite
         readings, and zero (whose sign can reach a weight's zero)."""
         rows = self._rows
+        i_f = np.asarray(i_f, dtype=float)
         vals = i_f.tolist()
         todo = [i for i, v in enumerate(vals) if v not in rows]
         if not todo:
@@ -389,7 +391,7 @@ class HoistDrive(Term):
         for i, row in fresh.items():
             v = vals[i]
             if v != 0.0 and math.isfinite(v):
-                rows[v] = row
+                rows[v] = row.copy()  # (not a view: it would keep its block's array)
         return np.array([fresh[i] if i in fresh else rows[v] for i, v in enumerate(vals)])
 
     def columns(self, k: Kinematics) -> np.ndarray:
