@@ -85,6 +85,7 @@ class ReplayRun:
             self.service.close()
         finally:
             self.session.close()
+            gc.unfreeze()  # (see gc_paused: the collector looks at everything again)
 
 
 def replay_devices(session: Any, max_age_s: float) -> dict[str, DeviceConfig]:
@@ -106,14 +107,17 @@ def _installation(cap: Any, default: Installation) -> Installation:
 
 @contextlib.contextmanager
 def gc_paused() -> Iterator[None]:
-    """No cyclic garbage collection inside: reading a capture makes a few hundred thousand
-    objects that all live until the replay ends, and the collector's passes over them
-    while they are made were 25-50 ms of the command (no cycles are made there)."""
+    """No cyclic garbage collection inside, and what is alive at the end set aside from
+    it (``gc.freeze``) until :meth:`ReplayRun.close`: reading a capture makes a few
+    hundred thousand objects that all live until the replay ends. The collector's passes
+    over them while they were made were 25-50 ms of the command, and left young, they
+    would be walked again by the first collections of the replay itself."""
     was = gc.isenabled()
     gc.disable()
     try:
         yield
     finally:
+        gc.freeze()
         if was:
             gc.enable()
 
