@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from functools import lru_cache
+from itertools import islice
 from typing import Generic, TypeVar
 
 import numpy as np
@@ -27,6 +28,10 @@ from shoveld.kinematics import window_samples
 from shoveld.kinematics.savgol import savgol_coeffs
 
 T = TypeVar("T")
+
+SLIDE_WINDOWS = 8
+"""The buffer the window's array slides along, in windows: the whole window is
+written anew once per this many windows' worth of rows (or after a pause)."""
 
 MAX_GAP_S = 0.1
 """The longest hole in the angle stream the fixed-lag fit bridges (5 ticks at 50 Hz)."""
@@ -43,13 +48,21 @@ class FixedLagSavgol(Generic[T]):
         # Coefficients for the centre point: value, first and second derivative.
         self.coeffs = np.stack([savgol_coeffs(self.window, polyorder, deriv=k, delta=dt, use="dot")
                                 for k in range(3)])
-        # A doubled ring: every sample is written twice, so the window is always one
-        # contiguous slice and the fit is a single small matrix product.
-        self._ring = np.zeros((2 * self.window, n_signals))
-        self._hole = np.zeros(2 * self.window, dtype=bool)
+        # The window's rows as Python tuples (None: a hole), and a numpy copy of them
+        # written only when a fit is asked for: the live loop asks for about one sample in
+        # five, and a row written into an array costs more than the tuple kept here.
+        # The copy slides along a buffer of several windows, so the window is always one
+        # contiguous slice and the fit a single small matrix product.
+        self._rows: deque[tuple[float, ...] | None] = deque(maxlen=self.window)
+        self._buf = np.zeros((SLIDE_WINDOWS * self.window, n_signals))
+        self._end = 0
+        """Where the copy's window ends in ``_buf``."""
+        self._unsynced = 0
+        """Rows pushed since the copy was last brought up to date."""
+        self._zero = (0.0,) * n_signals
+        """A hole's row in the copy (its weight is zero)."""
         self._holes = 0
-        """Holes (missing samples) in the ring."""
-        self._pos = 0
+        """Holes (missing samples) in the window."""
         self._count = 0
         self.tags: deque[T | None] = deque(maxlen=self.window)
         self.n = n_signals
@@ -119,38 +132,55 @@ class FixedLagSavgol(Generic[T]):
         """Forget the window: the next samples fill a new one."""
         self._count = 0
         self.tags.clear()
-        self._hole[:] = False
+        self._rows.clear()
         self._holes = 0
         self._run = 0
 
     def _write(self, values: tuple[float, ...] | None, tag: T | None) -> T | None:
-        w, pos = self.window, self._pos
-        ring = self._ring
-        hole = values is None
-        ring[pos] = ring[pos + w] = 0.0 if hole else values
-        was = bool(self._holes) and bool(self._hole[pos])  # (a ring without holes: no read)
-        if hole or was:  # the holes' bookkeeping, only where one comes or goes
-            self._hole[pos] = self._hole[pos + w] = hole
-            self._holes += int(hole) - int(was)
-        self._pos = (pos + 1) % w
+        rows = self._rows
+        if self._holes and len(rows) == self.window and rows[0] is None:
+            self._holes -= 1  # a hole leaves the window
+        if values is None:
+            self._holes += 1
+        rows.append(values)
+        self._unsynced += 1
         self._count += 1
         self.tags.append(tag)
-        if self._count < w:
+        if self._count < self.window:
             return None
         return self.tags[self.half]
+
+    def _window(self) -> np.ndarray:
+        """The window as a (window, n_signals) array: the rows pushed since the last fit
+        written into the buffer after the ones before them (the whole window anew at the
+        buffer's end or after a longer pause)."""
+        w, u, end = self.window, self._unsynced, self._end
+        if u:
+            buf, rows, zero = self._buf, self._rows, self._zero
+            if u >= w or end + u > len(buf):
+                buf[:w] = [zero if r is None else r for r in rows]
+                end = w
+            elif u == 1:
+                r = rows[-1]
+                buf[end] = zero if r is None else r
+                end += 1
+            else:
+                buf[end:end + u] = [zero if r is None else r for r in islice(rows, w - u, w)]
+                end += u
+            self._end, self._unsynced = end, 0
+        return self._buf[end - w:end]
 
     def derivatives(self) -> np.ndarray:
         """(3, n_signals) value, rate and acceleration at the centre of the current window
         (valid after :meth:`push_tag` returned a tag); fitted to the samples it has when
         there are holes, NaN when too many are missing."""
-        pos = self._pos
-        window = self._ring[pos:pos + self.window]
+        window = self._window()
         if not self._holes:
             return self.coeffs @ window
-        mask = self._hole[pos:pos + self.window]
-        if int(mask.sum()) > self.max_holes:
+        if self._holes > self.max_holes:
             return np.full((3, self.n), math.nan)
-        return _masked_coeffs(mask.tobytes(), self.window, self.polyorder, self.dt) @ window
+        mask = bytes(r is None for r in self._rows)
+        return _masked_coeffs(mask, self.window, self.polyorder, self.dt) @ window
 
 
 @lru_cache(maxsize=256)

@@ -25,6 +25,12 @@ class Model:
         self.param_names: list[str] = [p for t in self.terms for p in t.params]
         self.param_units: list[str] = [u for t in self.terms for u in t.units]
         self._spread_terms = [t for t in self.terms if t.spread_params]
+        self._slices: list[slice] = []
+        """Each term's parameters' columns."""
+        start = 0
+        for t in self.terms:
+            self._slices.append(slice(start, start + len(t.params)))
+            start += len(t.params)
 
     @classmethod
     def from_names(cls, effects: Iterable[str] = (),
@@ -54,15 +60,15 @@ class Model:
     def regressor(self, k: Kinematics) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """W (N,2,P), phi (N,2) and Psi (N,2,P) with e = W p + m (phi + Psi p)."""
         n = len(k)
-        ws, psis = [], []
-        for t in self.terms:
-            w = t.columns(k)
-            ws.append(w)
+        w_all = np.empty((n, 2, len(self.param_names)))
+        psi_all = np.zeros((n, 2, len(self.param_names)))
+        # each term's columns written into its slice (the live engine builds this for
+        # every block of ten samples: one array, not one per term and a concatenation)
+        for t, cols in zip(self.terms, self._slices, strict=True):
+            w_all[:, :, cols] = t.columns(k)
             ps = t.payload_columns(k)
-            psis.append(ps if ps is not None else np.zeros_like(w))
-        empty = np.zeros((n, 2, 0))
-        w_all = np.concatenate(ws, axis=2) if ws else empty
-        psi_all = np.concatenate(psis, axis=2) if psis else empty
+            if ps is not None:
+                psi_all[:, :, cols] = ps
         phi = payload_phi(k)
         # An extension may change what existing parameters multiply (e.g. swing adds a
         # centrifugal part to the arm's mass columns) and add known per-kg payload physics.
@@ -95,15 +101,13 @@ class Model:
         """d W / d i_H and d W / d i_C, each (N, 2, P): how the residual of each equation
         moves per ampere of measured hoist and crowd current, per unit of each parameter
         (terms linear in a measured current; see ``Term.current_derivative``)."""
-        dh, dc = [], []
-        for t in self.terms:
+        dh = np.zeros((len(k), 2, len(self.param_names)))
+        dc = np.zeros_like(dh)
+        for t, cols in zip(self.terms, self._slices, strict=True):
             d = t.current_derivative(k)
-            if d is None:
-                z = np.zeros((len(k), 2, len(t.params)))
-                d = (z, z)
-            dh.append(d[0])
-            dc.append(d[1])
-        return np.concatenate(dh, axis=2), np.concatenate(dc, axis=2)
+            if d is not None:
+                dh[:, :, cols], dc[:, :, cols] = d
+        return dh, dc
 
     @property
     def offset_index(self) -> tuple[int, int] | None:

@@ -20,6 +20,8 @@ equations, which are linear in the payload: ``residual = a m - b``.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from shoveld.model.kin import Kinematics
@@ -143,10 +145,20 @@ exact), and the residuals' integrated autocorrelation time (samples)."""
 
 def noise_regressors(i: np.ndarray, acc: np.ndarray) -> np.ndarray:
     """(N, 2, 4): what each channel's noise variance is linear in: 1, i^2, th''^2, d''^2."""
-    one = np.ones(len(i))
     out = np.empty((len(i), 2, 4))
-    for j in range(2):
-        out[:, j] = np.stack([one, i[:, j] ** 2, acc[:, 0] ** 2, acc[:, 1] ** 2], axis=1)
+    out[:, :, 0] = 1.0
+    out[:, :, 1] = i ** 2
+    out[:, :, 2] = (acc[:, 0] ** 2)[:, None]
+    out[:, :, 3] = (acc[:, 1] ** 2)[:, None]
+    return out
+
+
+@functools.lru_cache(maxsize=64)
+def _noise_coef(floor_a: float, rel: float, handle_acc_a: float, crowd_acc_a: float
+                ) -> np.ndarray:
+    """One channel's noise coefficients, squared: the same for every block of a pass."""
+    out = np.array([floor_a, rel, handle_acc_a, crowd_acc_a], dtype=float) ** 2
+    out.flags.writeable = False
     return out
 
 
@@ -161,7 +173,7 @@ def noise_sigma(noise: dict[str, dict[str, float]] | None, i: np.ndarray, acc: n
     out = np.empty_like(i, dtype=float)
     for j, ch in enumerate(CHANNELS):
         n = noise[ch]
-        coef = np.array([n["floor_a"], n["rel"], n["handle_acc_a"], n["crowd_acc_a"]]) ** 2
+        coef = _noise_coef(n["floor_a"], n["rel"], n["handle_acc_a"], n["crowd_acc_a"])
         out[:, j] = np.sqrt(reg[:, j] @ coef)
     return out
 

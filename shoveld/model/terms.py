@@ -14,6 +14,7 @@ Each term owns some parameters and contributes their columns of ``W`` (and of
 from __future__ import annotations
 
 import functools
+import math
 from typing import Any, ClassVar
 
 import numpy as np
@@ -42,8 +43,14 @@ def smooth_sign(v: np.ndarray, eps: float) -> np.ndarray:
     return np.tanh(v / eps)
 
 
+def _clip(x: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """``np.clip`` for arrays without NaN (the same values): two ufuncs without its
+    wrapper's checks, which on a block of ten rows cost several times the clipping."""
+    return np.minimum(np.maximum(x, lo), hi)
+
+
 def _sech(x: np.ndarray) -> np.ndarray:
-    return 1.0 / np.cosh(np.clip(x, -40.0, 40.0))
+    return 1.0 / np.cosh(_clip(x, -40.0, 40.0))  # (a NaN stays NaN, as with np.clip)
 
 
 class Term:
@@ -155,22 +162,23 @@ def field_basis(i_f: np.ndarray, knots: tuple[float, ...], slope_above: bool = T
     errors high (docs/engine.md). ``slope_below=False`` is that curve, for params files
     identified with it.
     """
-    kn = np.asarray(knots, dtype=float)
-    x = np.nan_to_num(np.asarray(i_f, dtype=float), nan=kn[-1])
+    kn = tuple(float(k) for k in knots)
+    x = np.asarray(i_f, dtype=float)
+    if not np.isfinite(x).all():  # (checked first: nan_to_num costs a block 6 us)
+        x = np.nan_to_num(x, nan=kn[-1])
     if len(kn) == 1:
         out = np.ones((len(x), 1))
         out[:, 0] = np.where(x < kn[0], np.maximum(x, 0.0) / kn[0], 1.0)
         return out
-    spline = _spline_basis(tuple(kn), ends)
-    out = spline(np.clip(x, kn[0], kn[-1]))
+    out = _spline_basis(kn, ends)(_clip(x, kn[0], kn[-1]))
     above = x > kn[-1]
     if slope_above and above.any():
-        top, slope = _end_slope(tuple(kn), ends)
+        top, slope = _end_slope(kn, ends)
         step = np.minimum(x[above], kn[-1] + 0.5 * (kn[-1] - kn[-2])) - kn[-1]
         out[above] = top[None, :] + step[:, None] * slope[None, :]
     below = x < kn[0]
     if below.any() and slope_below:
-        bottom, slope = _start_slope(tuple(kn), ends)
+        bottom, slope = _start_slope(kn, ends)
         x_b = kn[0] - 0.5 * (kn[1] - kn[0])
         step = np.maximum(x[below], x_b) - kn[0]
         # along the slope down to x_b, then proportional from the curve's value there
@@ -242,7 +250,7 @@ class _CubicSpline:
 
     def __call__(self, xs: np.ndarray) -> np.ndarray:
         x, h, m = self.x, self.h, self.m
-        i = np.clip(np.searchsorted(x, xs, side="right") - 1, 0, len(x) - 2)
+        i = _clip(np.searchsorted(x, xs, side="right") - 1, 0, len(x) - 2)
         hi = h[i]
         a = (x[i + 1] - xs) / hi
         b = 1.0 - a
@@ -264,6 +272,13 @@ class _Linear:
         f = (x - self.a) / (self.b - self.a)
         return np.stack([1.0 - f, f], axis=1)
 
+
+BLOCK_ROWS = 64
+"""Up to this many rows the hoist drive takes the field curve's weights row by row from
+the readings it has seen (the live engine's blocks of ten); longer arrays (the
+calibration's) in one evaluation."""
+ROWS_KEPT = 4096
+"""Field readings whose weights are kept (a 12-bit ADC channel reads no more codes)."""
 
 FIELD_KNOT_PREFIX = "K_H_f"
 """Name of a field knot's parameter: the prefix, then the knot's field current (A)."""
@@ -326,6 +341,8 @@ class HoistDrive(Term):
             raise ValueError(f"hyper.hoist_drive.below_bottom_knot: expected 'slope' or "
                              f"'proportional', got {self.below!r}")
         self._last: tuple[np.ndarray, np.ndarray] | None = None
+        self._rows: dict[float, np.ndarray] = {}
+        """The curve's weights of field readings seen in short blocks (``_block_basis``)."""
         self.ends = str(hyper.get("spline_ends", "natural"))
         """The spline's end condition: ``not-a-knot`` (what the calibration writes now) or
         ``natural`` (params files written before it)."""
@@ -343,11 +360,39 @@ class HoistDrive(Term):
             return last[1]
         if len(self.knots) == 1:
             out = np.ones((len(k), 1))
+        elif 0 < len(k) <= BLOCK_ROWS:
+            out = self._block_basis(k.i_hf)
         else:
-            out = field_basis(k.i_hf, self.knots, self.above == "slope",
-                              self.below == "slope", self.ends)
+            out = self._field_basis(k.i_hf)
         self._last = (k.i_hf, out)
         return out
+
+    def _field_basis(self, i_f: np.ndarray) -> np.ndarray:
+        """The curve's weights at ``i_f``, evaluated (this term's curve settings)."""
+        return field_basis(i_f, self.knots, self.above == "slope", self.below == "slope",
+                           self.ends)
+
+    def _block_basis(self, i_f: np.ndarray) -> np.ndarray:
+        """:meth:`_field_basis` of a short block, row by row from the rows of the readings
+        seen before. A block's readings repeat (the ADC is polled at half the loop's
+        rate, and a steady field reads the same few codes), and the curve's 30 numpy
+        operations cost a live block 40 us. ``field_basis`` works row by row, so a row
+        depends only on its reading: the same weights. Not kept: NaN and infinite
+        readings, and zero (whose sign can reach a weight's zero)."""
+        rows = self._rows
+        i_f = np.asarray(i_f, dtype=float)
+        vals = i_f.tolist()
+        todo = [i for i, v in enumerate(vals) if v not in rows]
+        if not todo:
+            return np.array([rows[v] for v in vals])
+        fresh = dict(zip(todo, self._field_basis(i_f[todo]), strict=True))
+        if len(rows) + len(todo) > ROWS_KEPT:
+            rows.clear()
+        for i, row in fresh.items():
+            v = vals[i]
+            if v != 0.0 and math.isfinite(v):
+                rows[v] = row.copy()  # (not a view: it would keep its block's array)
+        return np.array([fresh[i] if i in fresh else rows[v] for i, v in enumerate(vals)])
 
     def columns(self, k: Kinematics) -> np.ndarray:
         return self.current_columns(k, k.i_h)
