@@ -13,6 +13,10 @@ Two tables, on realistic simulated machines (``shoveld.sim.machine``):
 
     .venv/bin/python bench/error_budget.py [--machines 6] [--passes 60]
                                            [--ablate 20] [--jobs 2]
+                                           [--window S --polyorder N] [--angle-noise]
+
+``--window``/``--polyorder``/``--angle-noise``: the identification's options, as in
+``bench/payload_accuracy.py``.
 """
 
 from __future__ import annotations
@@ -118,9 +122,18 @@ def main() -> None:
     ap.add_argument("--ablate", type=int, default=20,
                     help="machines per row of the parameter table (0: skip it)")
     ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--window", type=float, help="smoothing window, s (default: calibrate's)")
+    ap.add_argument("--polyorder", type=int, help="smoothing order (default: calibrate's)")
+    ap.add_argument("--angle-noise", action="store_true",
+                    help="identify with the angles' errors-in-variables correction")
     args = ap.parse_args()
+    options = {k: v for k, v in (("window_s", args.window), ("polyorder", args.polyorder),
+                                 ("position_noise", args.angle_noise or None))
+               if v is not None}
+    if options:
+        print(f"identification: {options}")
     t0 = time.perf_counter()
-    with ProcessPoolExecutor(args.jobs) as ex:
+    with ProcessPoolExecutor(args.jobs, initializer=pa._init, initargs=(options,)) as ex:
         res = list(ex.map(payload_job, [{"seed": s, "passes": args.passes}
                                         for s in range(1, args.machines + 1)]))
         abl = list(ex.map(ablation_job, [(n, s) for n in ABLATIONS
