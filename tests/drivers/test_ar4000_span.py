@@ -5,7 +5,6 @@ implausible and negative distances, a babbling stretch, a silence)."""
 
 from __future__ import annotations
 
-import copy
 import math
 from pathlib import Path
 from typing import Any
@@ -19,6 +18,8 @@ from drivers.base import Reading
 from drivers.capture.format import read_capture
 from shoveld.daemon.config import DeviceConfig, device_signals
 from shoveld.daemon.syncreplay import MemorySerial, StepClock, SyncDevice, SyncReplay
+
+from .span_play import play
 
 CAPTURE = Path(__file__).resolve().parents[2] / "hil_fixtures" / "captures" / "daemon-e2e"
 PERIOD = 0.01
@@ -68,34 +69,22 @@ def _play(driver: Ar4000Driver, port: MemorySerial, clock: StepClock, ticks: int
     """Readings and health after every tick; span reads of up to ``window`` ticks
     wherever they can start (None: the per-tick reads only)."""
     readings: list[tuple[Any, ...]] = []
-    health: list[dict[str, Any]] = []
     at = [0]
 
     def sink(r: Reading) -> None:
         v = r.values.get(DISTANCE, math.nan)
         readings.append((at[0], r.t_host, "nan" if math.isnan(v) else v,
                          tuple(sorted(r.invalid))))
+
+    def span_rows(got: Any) -> None:
+        for i, tick in enumerate(got.reading_ticks.tolist()):
+            v = float(got.values[DISTANCE][i])
+            readings.append((tick, tick * PERIOD, "nan" if math.isnan(v) else v,
+                             (DISTANCE,) if math.isnan(v) else ()))
+
     dev = SyncDevice("laser", driver, port, sink, clock)
     reader = Ar4000SpanReader(driver, port, PERIOD) if window else None
-    k = spans = 0
-    while k < ticks:
-        got = reader.read(k, min(ticks, k + window)) if reader and window else None
-        if got is not None:
-            spans += 1
-            for i, tick in enumerate(got.reading_ticks.tolist()):
-                v = float(got.values[DISTANCE][i])
-                readings.append((tick, tick * PERIOD, "nan" if math.isnan(v) else v,
-                                 (DISTANCE,) if math.isnan(v) else ()))
-            health += [got.health_after(i).as_dict() for i in range(got.ticks)]
-            k += got.ticks
-            continue
-        clock.t = t = k * PERIOD
-        at[0] = k
-        dev.step(t)
-        health.append(copy.deepcopy(driver.health.as_dict()))
-        k += 1
-    assert window is None or spans > 0
-    return readings, health
+    return readings, play(dev, reader, clock, ticks, window, PERIOD, span_rows, at)
 
 
 @pytest.mark.parametrize("window", [1000, 41])

@@ -5,7 +5,6 @@ of timeouts that makes the driver reconnect, values that decode to no number).""
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import math
 from pathlib import Path
@@ -22,6 +21,8 @@ from drivers.modbus_adc.driver import ModbusAdcDriver
 from drivers.modbus_adc.span import ModbusSpanReader
 from shoveld.daemon.config import DeviceConfig, device_signals
 from shoveld.daemon.syncreplay import MemoryModbus, StepClock, SyncDevice, SyncReplay
+
+from .span_play import play
 
 CAPTURE = Path(__file__).resolve().parents[2] / "hil_fixtures" / "captures" / "daemon-e2e"
 PERIOD = 0.01
@@ -57,36 +58,24 @@ def _damage(reads: list[RegisterRead]) -> list[RegisterRead]:
 
 
 def _play(driver: ModbusAdcDriver, port: MemoryModbus, clock: StepClock, ticks: int,
-          window: int | None, nan_word: int | None = None
-          ) -> tuple[list[tuple[Any, ...]], list[dict[str, Any]]]:
+          window: int | None) -> tuple[list[tuple[Any, ...]], list[dict[str, Any]]]:
     """Readings and health after every tick; span reads of up to ``window`` ticks
     wherever they can start (None: the per-tick polls only)."""
     readings: list[tuple[Any, ...]] = []
-    health: list[dict[str, Any]] = []
     names = [ch.name for ch in driver.config.channels]
 
     def sink(r: Reading) -> None:
         readings.append((round(r.t_host / PERIOD), r.t_host,
                          tuple(r.values.get(k, "-") for k in names), tuple(sorted(r.invalid))))
+
+    def span_rows(got: Any) -> None:
+        for i, tick in enumerate(got.reading_ticks.tolist()):
+            readings.append((tick, float(got.times[i]),
+                             tuple(float(got.values[n][i]) for n in names), ()))
+
     dev = SyncDevice(driver.name, driver, port, sink, clock)
     reader = ModbusSpanReader(driver, port, port.registers, PERIOD) if window else None
-    k = spans = 0
-    while k < ticks:
-        got = reader.read(k, min(ticks, k + window)) if reader and window else None
-        if got is not None:
-            spans += 1
-            for i, tick in enumerate(got.reading_ticks.tolist()):
-                readings.append((tick, float(got.times[i]),
-                                 tuple(float(got.values[n][i]) for n in names), ()))
-            health += [got.health_after(i).as_dict() for i in range(got.ticks)]
-            k += got.ticks
-            continue
-        clock.t = t = k * PERIOD
-        dev.step(t)
-        health.append(copy.deepcopy(driver.health.as_dict()))
-        k += 1
-    assert window is None or spans > 0
-    return readings, health
+    return readings, play(dev, reader, clock, ticks, window, PERIOD, span_rows)
 
 
 @pytest.mark.parametrize("name", ["adc_motors", "adc_incl"])

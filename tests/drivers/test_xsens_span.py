@@ -27,6 +27,8 @@ from hil_fixtures.mti import MtiEmulator
 from shoveld.daemon.config import DeviceConfig, device_signals
 from shoveld.daemon.syncreplay import MemorySerial, StepClock, SyncDevice, SyncReplay
 
+from .span_play import play
+
 CAPTURE = Path(__file__).resolve().parents[2] / "hil_fixtures" / "captures" / "daemon-e2e"
 PERIOD = 0.01
 Edit = Callable[[bytearray, list[int], FrameLayout], bytearray]
@@ -41,31 +43,20 @@ def _play(driver: MtiSerialDriver, port: MemorySerial, clock: StepClock, ticks: 
     """Readings (tick, values, invalid) and health after every tick; span reads of up to
     ``window`` ticks wherever they can start (None: the per-tick reads only)."""
     readings: list[tuple[Any, ...]] = []
-    health: list[dict[str, Any]] = []
     at = [0]
 
     def sink(r: Reading) -> None:
         readings.append((at[0], r.t_host, tuple(r.values.get(k, "-") for k in VALUE_KEYS),
                          tuple(sorted(r.invalid))))
+
+    def span_rows(got: Any) -> None:
+        for i, tick in enumerate(got.reading_ticks.tolist()):
+            readings.append((tick, tick * PERIOD, tuple(float(got.values[key][i])
+                                                        for key in VALUE_KEYS), ()))
+
     dev = SyncDevice("mti", driver, port, sink, clock)
     reader = MtiSpanReader(driver, port, PERIOD) if window else None
-    k = spans = 0
-    while k < ticks:
-        got = reader.read(k, min(ticks, k + window)) if reader and window else None
-        if got is not None:
-            spans += 1
-            for i, tick in enumerate(got.reading_ticks.tolist()):
-                readings.append((tick, tick * PERIOD, tuple(float(got.values[key][i])
-                                                            for key in VALUE_KEYS), ()))
-            health += [_health(got.health_after(i)) for i in range(got.ticks)]
-            k += got.ticks
-            continue
-        clock.t = t = k * PERIOD
-        at[0] = k
-        dev.step(t)
-        health.append(_health(driver.health))
-        k += 1
-    assert window is None or spans > 0
+    health = play(dev, reader, clock, ticks, window, PERIOD, span_rows, at)
     return readings, health, bytes(driver._parser._sniffer._buf)
 
 
