@@ -25,6 +25,7 @@ from drivers.xsens.mtdata2 import (
     TYPE_MASK,
     XDI,
     iter_packets,
+    packet_ids,
 )
 from drivers.xsens.xbus import BID_MASTER, EXTENDED_LENGTH, MID, PREAMBLE
 
@@ -74,11 +75,9 @@ class FrameLayout:
         if end < len(payload):  # a truncated tail: every byte of it must match
             structure[head + end:-1] = True
         self.repeated = {k for k, n in seen.items() if n > 1}
-        xdis = [xdi for xdi, _, _ in iter_packets(payload)]
-        self.ids = (frozenset(xdis) if len(set(xdis)) == len(xdis) and end == len(payload)
-                    else None)
-        """The packets' full identifiers, as :func:`~drivers.xsens.mtdata2.mtdata2_values_ids`
-        gives them for every frame with these header bytes."""
+        self.ids = packet_ids(payload)
+        """The packets' full identifiers, the same for every frame with these header
+        bytes (:func:`~drivers.xsens.mtdata2.packet_ids`)."""
         self.structure = np.flatnonzero(structure)
         self.template = frame[self.structure].copy()
 

@@ -408,9 +408,8 @@ def decode_mtdata2(payload: bytes | memoryview) -> list[DataItem]:
             for xdi, name, conv, prec, frame, a, b in lay.slots]
 
 
-def mtdata2_values(payload: bytes | memoryview) -> dict[int, Any]:
-    """Fast path for drivers: ``{xdi & 0xFFF0: value}`` of the well-formed packets."""
-    lay = _layout(payload)
+def _values(lay: _Layout, payload: bytes | memoryview) -> dict[int, Any]:
+    """``{xdi & 0xFFF0: value}`` of the payload's well-formed packets, by its layout."""
     vals = lay.data.unpack_from(payload)
     out: dict[int, Any] = {}
     for key, how, conv, a, b in lay.values_plan:  # planned once per layout
@@ -423,22 +422,23 @@ def mtdata2_values(payload: bytes | memoryview) -> dict[int, Any]:
     return out
 
 
+def mtdata2_values(payload: bytes | memoryview) -> dict[int, Any]:
+    """Fast path for drivers: ``{xdi & 0xFFF0: value}`` of the well-formed packets."""
+    return _values(_layout(payload), payload)
+
+
 def mtdata2_values_ids(payload: bytes | memoryview
                        ) -> tuple[dict[int, Any], frozenset[int] | None]:
-    """:func:`mtdata2_values` and the payload's full packet identifiers (None if one
-    repeats), from one layout look-up: a device sends exactly the identifiers it was
-    configured with, so a frame whose identifier bytes were hit shows here."""
+    """:func:`mtdata2_values` and :func:`packet_ids`, from one layout look-up."""
     lay = _layout(payload)
-    vals = lay.data.unpack_from(payload)
-    out: dict[int, Any] = {}
-    for key, how, conv, a, b in lay.values_plan:
-        if how == _SLICE:
-            out[key] = vals[a:b]
-        elif how == _ONE:
-            out[key] = vals[a]
-        else:
-            out[key] = _convert(conv, vals, a, b)
-    return out, lay.ids
+    return _values(lay, payload), lay.ids
+
+
+def packet_ids(payload: bytes | memoryview) -> frozenset[int] | None:
+    """The payload's full packet identifiers (precision and frame bits too), or None if
+    one repeats or bytes are left over: a device sends exactly the identifiers it was
+    configured with, so a frame whose identifier bytes were hit shows here."""
+    return _layout(payload).ids
 
 
 def encode_item(xdi: int, value: Any) -> bytes:
