@@ -122,14 +122,9 @@ def main() -> None:
     ap.add_argument("--ablate", type=int, default=20,
                     help="machines per row of the parameter table (0: skip it)")
     ap.add_argument("--jobs", type=int, default=2)
-    ap.add_argument("--window", type=float, help="smoothing window, s (default: calibrate's)")
-    ap.add_argument("--polyorder", type=int, help="smoothing order (default: calibrate's)")
-    ap.add_argument("--angle-noise", action="store_true",
-                    help="identify with the angles' errors-in-variables correction")
+    pa.add_identification_args(ap)
     args = ap.parse_args()
-    options = {k: v for k, v in (("window_s", args.window), ("polyorder", args.polyorder),
-                                 ("position_noise", args.angle_noise or None))
-               if v is not None}
+    options = pa.identification_options(args)
     if options:
         print(f"identification: {options}")
     t0 = time.perf_counter()

@@ -49,6 +49,21 @@ def _init(smoothing: dict[str, Any]) -> None:
     SMOOTHING.update(smoothing)
 
 
+def add_identification_args(ap: argparse.ArgumentParser) -> None:
+    """The identification's options (``calibrate``'s), for this bench and its siblings."""
+    ap.add_argument("--window", type=float, help="smoothing window, s (default: calibrate's)")
+    ap.add_argument("--polyorder", type=int, help="smoothing order (default: calibrate's)")
+    ap.add_argument("--angle-noise", action="store_true",
+                    help="identify with the angles' errors-in-variables correction")
+
+
+def identification_options(args: argparse.Namespace) -> dict[str, Any]:
+    """Calibrator keywords of the options given (for ``_init`` in each worker)."""
+    return {k: v for k, v in (("window_s", args.window), ("polyorder", args.polyorder),
+                              ("position_noise", args.angle_noise or None))
+            if v is not None}
+
+
 def trials(machine: Any, seed: int) -> list[Any]:
     """The machine's two calibration trials: empty and 8,420 kg."""
     from shoveld.sim.scenario import simulate_calibration
@@ -165,14 +180,9 @@ def main() -> None:
                     help="also identify each realistic machine on its trials plus a session "
                          "of N scale-verified passes, and print its figures; the coverage "
                          "table is then of that identification (0: not)")
-    ap.add_argument("--window", type=float, help="smoothing window, s (default: calibrate's)")
-    ap.add_argument("--polyorder", type=int, help="smoothing order (default: calibrate's)")
-    ap.add_argument("--angle-noise", action="store_true",
-                    help="identify with the angles' errors-in-variables correction")
+    add_identification_args(ap)
     args = ap.parse_args()
-    smoothing = {k: v for k, v in (("window_s", args.window), ("polyorder", args.polyorder),
-                                   ("position_noise", args.angle_noise or None))
-                 if v is not None}
+    smoothing = identification_options(args)
     if smoothing:
         print(f"smoothing: {smoothing}")
     t0 = time.perf_counter()
