@@ -350,7 +350,10 @@ class BulkFeed:
         n, k0 = len(ks), int(ks[0])
         conn = tr.connected.array()[:n]
         rk = tr.tick.array()
-        idx = np.searchsorted(rk, ks, side="right") - 1  # the newest reading by each tick
+        # the newest reading by each tick: the readings at or before it, less one (the
+        # ticks are k0, k0 + 1, ...: counted over the sorted reading ticks at once, as
+        # searchsorted(rk, ks, side="right") - 1 gives, without a search per tick)
+        idx = np.cumsum(np.bincount(np.clip(rk - k0, 0, n), minlength=n + 1)[:n]) - 1
         have = idx >= 0
         j = np.where(have, idx, 0)
         th = tr.t_host.array()

@@ -339,8 +339,9 @@ class Service:
                 log.warning("drivers not all connected after %.0f s; running degraded",
                             self.cfg.loop.ready_timeout_s)
             self.notifier.ready("running" if up else "running degraded: drivers not all up")
-        if self.notifier.watchdog_due() and self._healthy():
-            self.notifier.watchdog()
+        notifier = self.notifier
+        if notifier.watchdog_s is not None and notifier.watchdog_due() and self._healthy():
+            notifier.watchdog()  # (no watchdog, as in every replay: not even the call)
 
     def _published(self, joints_only: bool) -> None:
         """A message went out: the readings waiting for it have had their effect."""
