@@ -19,6 +19,7 @@ gives what the stepped path gives on every committed capture.
 
 from __future__ import annotations
 
+import gc
 import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -432,8 +433,17 @@ class BulkFeed:
         for b in set(bits):  # not np.unique: its first call imports numpy.ma (10 ms)
             if b:
                 sets[b] = frozenset(sg for i, sg in enumerate(SIGNAL_FIELDS) if b >> i & 1)
-        # Sample called through map over the columns: no argument list built per row
-        return list(map(Sample, *rows.T.tolist(), map(sets.__getitem__, bits)))
+        # Sample called through map over the columns: no argument list built per row.
+        # Without the cyclic collector meanwhile: samples hold only numbers and sets, so
+        # there is no cycle to find, and each of the collections the 6,000 new objects
+        # set off walked the columns' lists (90,000 items) and the growing result
+        was = gc.isenabled()
+        gc.disable()
+        try:
+            return list(map(Sample, *rows.T.tolist(), map(sets.__getitem__, bits)))
+        finally:
+            if was:
+                gc.enable()
 
 
 def unwrapped_swing(inst: Installation, yaw: np.ndarray, prev: float

@@ -55,6 +55,10 @@ class LoopStats:
         self._work = [0.0] * window
         self._i = 0
         self._n = 0
+        self._work_at = 0
+        """``_n`` at the last tick with work other than zero: a simulated clock does not
+        move during a tick, so there all of it is zero and the health message's
+        percentiles need no sort (half its cost in a replay)."""
         self.keep_all = keep_all
         self.all_late: list[float] = []
         self.all_work: list[float] = []
@@ -68,6 +72,8 @@ class LoopStats:
         i += 1
         self._i = 0 if i == self._window else i
         self._n += 1
+        if work_s:
+            self._work_at = self._n
         self.ticks += 1
         if late_s > self.max_late_s:
             self.max_late_s = late_s
@@ -98,7 +104,8 @@ class LoopStats:
                               "max": round(1e3 * vmax, 3),
                               "max_since_start": round(1e3 * self.max_late_s, 3)}
         if work:
-            (w50, w99), wmax = percentiles(work)
+            (w50, w99), wmax = (((0.0, 0.0), 0.0) if self._work_at <= self._n - n
+                                else percentiles(work))  # (all zero: what it would give)
             d["tick_work_ms"] = {"p50": round(1e3 * w50, 3), "p99": round(1e3 * w99, 3),
                                  "max": round(1e3 * wmax, 3)}
         return d
