@@ -103,9 +103,10 @@ class Column:
         return sum(map(len, self.parts)) + len(self.items)
 
     def keep_last(self) -> None:
-        """Only the last value stays (none if there is none)."""
+        """Only the last value stays (none if there is none), copied: a view would keep
+        the whole span's array alive."""
         a = self.array()
-        self.parts[:] = [a[-1:]]
+        self.parts[:] = [a[-1:].copy()]
 
     def clear(self) -> None:
         self.items.clear()
