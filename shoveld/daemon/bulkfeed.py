@@ -19,6 +19,7 @@ gives what the stepped path gives on every committed capture.
 
 from __future__ import annotations
 
+import gc
 import math
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -66,18 +67,64 @@ def _keys(dev: DeviceConfig) -> tuple[str, ...]:
     return tuple(dev.signals)
 
 
+class Column:
+    """A column of a span grown by single values (the per-tick steps) and by whole
+    arrays (the span reads), in their order. The span reads' arrays stay arrays: they
+    went through Python lists and back to numpy before (0.4 us a tick of the replay)."""
+
+    __slots__ = ("items", "parts", "dtype")
+
+    def __init__(self, dtype: type) -> None:
+        self.items: list[Any] = []
+        """Values appended one by one since the last array (cleared, never replaced: a
+        sink holds its bound ``append``)."""
+        self.parts: list[np.ndarray] = []
+        self.dtype = dtype
+
+    def _close_items(self) -> None:
+        if self.items:
+            self.parts.append(np.array(self.items, dtype=self.dtype))
+            self.items.clear()
+
+    def extend(self, a: np.ndarray) -> None:
+        """Append an array's values after those appended so far."""
+        self._close_items()
+        self.parts.append(np.asarray(a, dtype=self.dtype))
+
+    def array(self) -> np.ndarray:
+        """All values, as one array (kept as the column's only part)."""
+        self._close_items()
+        parts = self.parts
+        if len(parts) != 1:
+            parts[:] = [np.concatenate(parts) if parts else np.empty(0, self.dtype)]
+        return parts[0]
+
+    def __len__(self) -> int:
+        return sum(map(len, self.parts)) + len(self.items)
+
+    def keep_last(self) -> None:
+        """Only the last value stays (none if there is none), copied: a view would keep
+        the whole span's array alive."""
+        a = self.array()
+        self.parts[:] = [a[-1:].copy()]
+
+    def clear(self) -> None:
+        self.items.clear()
+        self.parts.clear()
+
+
 @dataclass
 class Track:
     """One device's readings over a span, as columns (NaN: invalid or missing)."""
 
     keys: tuple[str, ...]
-    tick: list[int] = field(default_factory=list)
+    tick: Column = field(default_factory=lambda: Column(np.int64))
     """Tick index at which each reading reached the store."""
-    t_host: list[float] = field(default_factory=list)
-    cols: list[list[float]] = field(default_factory=list)
-    connected: list[bool] = field(default_factory=list)
+    t_host: Column = field(default_factory=lambda: Column(np.float64))
+    cols: list[Column] = field(default_factory=list)
+    connected: Column = field(default_factory=lambda: Column(np.bool_))
     """The driver's ``health.connected`` after each tick of the span."""
-    done: list[bool] = field(default_factory=list)
+    done: Column = field(default_factory=lambda: Column(np.bool_))
     """After each tick of the span: the capture's end has passed and nothing is left."""
     health: dict[int, DriverHealth] = field(default_factory=dict)
     """Copies of the driver's health where the service may look at it (its health
@@ -88,13 +135,13 @@ class Track:
     """The device's invalid signals at its last tick with a usable reading."""
 
     def __post_init__(self) -> None:
-        self.cols = [[] for _ in self.keys]
+        self.cols = [Column(np.float64) for _ in self.keys]
 
     def sink(self, at: list[int]) -> Callable[[Reading], None]:
         """A driver sink that keeps only what the assembler uses; ``at[0]``: the tick."""
         nan = math.nan
-        appends = [(k, c.append) for k, c in zip(self.keys, self.cols, strict=True)]
-        tick, t_host = self.tick.append, self.t_host.append
+        appends = [(k, c.items.append) for k, c in zip(self.keys, self.cols, strict=True)]
+        tick, t_host = self.tick.items.append, self.t_host.items.append
 
         def put(r: Reading) -> None:
             tick(at[0])
@@ -106,12 +153,13 @@ class Track:
 
     def keep_last(self) -> None:
         """Start a new span, keeping the newest reading (the next span may still use it)."""
-        if self.tick:
-            self.dropped += len(self.tick) - 1
-            self.tick[:] = self.tick[-1:]
-            self.t_host[:] = self.t_host[-1:]
+        n = len(self.tick)
+        if n:
+            self.dropped += n - 1
+            self.tick.keep_last()
+            self.t_host.keep_last()
             for c in self.cols:
-                c[:] = c[-1:]
+                c.keep_last()
         self.connected.clear()
         self.done.clear()
         self.health.clear()
@@ -197,7 +245,7 @@ class BulkFeed:
         sd, tr = self._devs[name], self.tracks[name]
         transport, health = sd.transport, sd.driver.health
         clock, at, step = self.sync.clock, self._at, sd.step
-        conn, done = tr.connected.append, tr.done.append
+        conn, done = tr.connected.items.append, tr.done.items.append
         end_t, period = self.sync.end_t, self.period
         prev: bool | None = None
         k, retry = k0, self._retry.get(name, (k0, 1))
@@ -228,14 +276,15 @@ class BulkFeed:
     def _take(self, tr: Track, got: SpanResult, look: set[int], first: bool) -> None:
         """A span read's readings, connection, end and health into the device's track."""
         n, k0, period = got.ticks, got.k0, self.period
-        tr.tick.extend(got.reading_ticks.tolist())
-        tr.t_host.extend((got.reading_ticks * period).tolist())  # tick_time of each
+        rt = got.reading_ticks
+        tr.tick.extend(rt)
+        tr.t_host.extend(rt * period)  # tick_time of each
         for key, col in zip(tr.keys, tr.cols, strict=True):
             v = got.values.get(key)  # a quantity the driver does not read: NaN, as the sink
-            col.extend(v.tolist() if v is not None else [math.nan] * len(got.reading_ticks))
-        tr.connected.extend([True] * n)
+            col.extend(v if v is not None else np.full(len(rt), math.nan))
+        tr.connected.extend(np.ones(n, dtype=bool))
         t = np.arange(k0, k0 + n) * period
-        tr.done.extend(((t >= self.sync.end_t) & got.exhausted).tolist())
+        tr.done.extend((t >= self.sync.end_t) & got.exhausted)
         marks = sorted(k for k in look if k0 <= k < k0 + n)
         if first:
             marks = sorted({k0, *marks})
@@ -269,7 +318,7 @@ class BulkFeed:
             look = self._health_ticks(k0, k1)
             for name in self.devices:
                 self._run_device(name, k0, k1, look)
-            all_done = np.logical_and.reduce([np.asarray(tr.done, dtype=bool)
+            all_done = np.logical_and.reduce([tr.done.array()
                                               for tr in self.tracks.values()])
             hit = np.flatnonzero(all_done)
             if len(hit):
@@ -301,12 +350,15 @@ class BulkFeed:
         signals' bits into ``bad`` where not, and its state where health is looked at."""
         tr = self.tracks[name]
         n, k0 = len(ks), int(ks[0])
-        conn = np.asarray(tr.connected[:n], dtype=bool)
-        rk = np.asarray(tr.tick, dtype=np.int64)
-        idx = np.searchsorted(rk, ks, side="right") - 1  # the newest reading by each tick
+        conn = tr.connected.array()[:n]
+        rk = tr.tick.array()
+        # the newest reading by each tick: the readings at or before it, less one (the
+        # ticks are k0, k0 + 1, ...: counted over the sorted reading ticks at once, as
+        # searchsorted(rk, ks, side="right") - 1 gives, without a search per tick)
+        idx = np.cumsum(np.bincount(np.clip(rk - k0, 0, n), minlength=n + 1)[:n]) - 1
         have = idx >= 0
         j = np.where(have, idx, 0)
-        th = np.asarray(tr.t_host, dtype=float)
+        th = tr.t_host.array()
         if np.any(th > 0.0 + rk * self.period):  # the stepped clock cannot do this
             raise RuntimeError(f"{name}: a reading stamped after its tick; the bulk "
                                "replay assumes readings stamped by the stepped clock")
@@ -318,8 +370,7 @@ class BulkFeed:
         state[~conn] = DISCONNECTED
         live = have & conn & ~stale
         bad[~live] |= sum(_BIT[sg] for sg in dev.signals)
-        cols = [np.asarray(c, dtype=float)[j] if len(c) else np.full(n, np.nan)
-                for c in tr.cols]
+        cols = [c.array()[j] if len(c) else np.full(n, np.nan) for c in tr.cols]
         sig_bad = self._contribute(dev, cols, live, rows)
         bad |= sig_bad
         state[live & (sig_bad != 0)] = INVALID
@@ -383,8 +434,17 @@ class BulkFeed:
         for b in set(bits):  # not np.unique: its first call imports numpy.ma (10 ms)
             if b:
                 sets[b] = frozenset(sg for i, sg in enumerate(SIGNAL_FIELDS) if b >> i & 1)
-        # Sample called through map over the columns: no argument list built per row
-        return list(map(Sample, *rows.T.tolist(), map(sets.__getitem__, bits)))
+        # Sample called through map over the columns: no argument list built per row.
+        # Without the cyclic collector meanwhile: samples hold only numbers and sets, so
+        # there is no cycle to find, and each of the collections the 6,000 new objects
+        # set off walked the columns' lists (90,000 items) and the growing result
+        was = gc.isenabled()
+        gc.disable()
+        try:
+            return list(map(Sample, *rows.T.tolist(), map(sets.__getitem__, bits)))
+        finally:
+            if was:
+                gc.enable()
 
 
 def unwrapped_swing(inst: Installation, yaw: np.ndarray, prev: float
@@ -454,7 +514,12 @@ class BulkAssembler:
         self._views: dict[int, Any] = {}
         self._k0 = 0
         self._i = 0
+        self._n = 0
+        """Samples in the current span."""
         self._last_span = False
+        self.finished = False
+        """The last tick of the capture has been served (a plain attribute, not a
+        property: the replay's loop asks at every tick)."""
         self.error: BaseException | None = None
         """What stopped the feed before the capture's end (the replay raises it)."""
         self.k = -1
@@ -462,15 +527,19 @@ class BulkAssembler:
 
     def sample(self, t: float) -> Sample:
         i = self._i
-        if i >= len(self._samples):
+        if i >= self._n:
             try:
                 span = next(self._spans)
             except BaseException as e:  # the replay must end here, not fail every tick
-                self.error, self._last_span, self._samples = e, True, []
+                self.error, self._last_span, self._samples, self._n = e, True, [], 0
+                self.finished = True
                 raise
             self._samples, self._views, self._k0, i = span.samples, span.views, span.k0, 0
+            self._n = len(span.samples)
             self._last_span = self.feed.finished  # the feed works lazily: it knows now
         self._i = i + 1
+        if self._last_span and i + 1 >= self._n:
+            self.finished = True
         k = self.k = self._k0 + i
         view = self._views.get(k)
         if view is not None:
@@ -483,7 +552,3 @@ class BulkAssembler:
             self.state[name] = st
             self.store.set_count(name, count)
 
-    @property
-    def finished(self) -> bool:
-        """The last tick of the capture has been served."""
-        return self._last_span and self._i >= len(self._samples)

@@ -55,46 +55,57 @@ class LoopStats:
         self._work = [0.0] * window
         self._i = 0
         self._n = 0
+        self._work_at = 0
+        """``_n`` at the last tick with work other than zero: a simulated clock does not
+        move during a tick, so there all of it is zero and the health message's
+        percentiles need no sort (half its cost in a replay)."""
         self.keep_all = keep_all
         self.all_late: list[float] = []
         self.all_work: list[float] = []
         self.started_mono = time.monotonic()
-        self.last_tick_mono = math.nan
 
     def record(self, late_s: float, work_s: float) -> None:
+        """One tick's lateness and work (called at every tick: kept to plain stores)."""
         i = self._i
         self._late[i] = late_s
         self._work[i] = work_s
         i += 1
         self._i = 0 if i == self._window else i
         self._n += 1
+        if work_s:
+            self._work_at = self._n
         self.ticks += 1
         if late_s > self.max_late_s:
             self.max_late_s = late_s
         if self.keep_all:
             self.all_late.append(late_s)
             self.all_work.append(work_s)
-        self.last_tick_mono = time.monotonic()
 
     def recent(self) -> tuple[list[float], list[float]]:
         n = min(self._n, self._window)
         return self._late[:n], self._work[:n]
 
     def as_dict(self, rate_hz: float, simulated: bool = False) -> dict[str, Any]:
-        late, work = self.recent()
+        n = min(self._n, self._window)
+        full = n == self._window
+        # the rings themselves once full (percentiles sorts its own copy), and the
+        # lateness only where it is shown: a replay's health message copied 3,000
+        # floats twice more than it used
+        work = self._work if full else self._work[:n]
         elapsed = time.monotonic() - self.started_mono
         d: dict[str, Any] = {
             "rate_hz": rate_hz,
             "ticks": self.ticks, "overruns": self.overruns, "skipped_ticks": self.skipped,
             "actual_rate_hz": round(self.ticks / elapsed, 2) if elapsed > 0 else None,
         }
-        if late and not simulated:
-            (p50, p99), vmax = percentiles(late)
+        if n and not simulated:
+            (p50, p99), vmax = percentiles(self._late if full else self._late[:n])
             d["jitter_ms"] = {"p50": round(1e3 * p50, 3), "p99": round(1e3 * p99, 3),
                               "max": round(1e3 * vmax, 3),
                               "max_since_start": round(1e3 * self.max_late_s, 3)}
         if work:
-            (w50, w99), wmax = percentiles(work)
+            (w50, w99), wmax = (((0.0, 0.0), 0.0) if self._work_at <= self._n - n
+                                else percentiles(work))  # (all zero: what it would give)
             d["tick_work_ms"] = {"p50": round(1e3 * w50, 3), "p99": round(1e3 * w99, 3),
                                  "max": round(1e3 * wmax, 3)}
         return d
@@ -285,17 +296,21 @@ class FixedRateLoop:
              max_ticks: int | None, base: float) -> None:
         clock, period, stats = self.clock, self.period, self.stats
         pll = self.phase_lock
+        # bound once, not looked up at every tick (a replay runs this loop thousands of
+        # times a second, where the lookups were a tenth of a microsecond a tick)
+        stopped, sleep_until, now = stop.is_set, clock.sleep_until, clock.now
+        tick, record = self.tick, stats.record
         k = 0
-        while not stop.is_set():
+        while not stopped():
             deadline = base + k * period
-            if not clock.sleep_until(deadline, stop):
+            if not sleep_until(deadline, stop):
                 break
-            woke = clock.now()
+            woke = now()
             late = woke - deadline
             self.behind_s = late
-            self.tick(deadline)
-            end = clock.now()
-            stats.record(late, end - woke)
+            tick(deadline)
+            end = now()
+            record(late, end - woke)
             k += 1
             if max_ticks is not None and k >= max_ticks:
                 break

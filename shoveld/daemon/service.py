@@ -305,21 +305,25 @@ class Service:
         assert engine is not None
         if self.before_tick is not None:
             self.before_tick(t)
-        s = self.assembler.sample(t)
+        assembler = self.assembler
+        s = assembler.sample(t)
         pending = self._pending_arrivals
-        if self.assembler.new_arrivals and self._measure_latency:
-            pending.extend(self.assembler.new_arrivals)
+        if assembler.new_arrivals and self._measure_latency:
+            pending.extend(assembler.new_arrivals)
             if len(pending) > MAX_PENDING_ARRIVALS:  # nothing published for a while
                 del pending[:-MAX_PENDING_ARRIVALS]
         k = self._tick_no
-        self._tick_no += 1
+        self._tick_no = k + 1
         # joints first: they need only the sample, not the engine's step
         if k % self._joints_every == 0:
             if self.publisher.put_text(
                     "joints", lambda: joints_json(self.clock.wall(t), s)) and pending:
                 self._published(True)
         for ev in engine.step(s):
-            self._event(ev, t)
+            if ev.__class__ is LiveEstimate:  # one every tick: kept here, not in _event
+                self._live = (ev, engine.pass_index, engine.truck.index)
+            else:
+                self._event(ev, t)
         if k % self._live_every == 0 and self._live is not None:
             if self.publisher.put_text("payload/live", self.live_json) and \
                     self._pending_arrivals:
@@ -335,8 +339,9 @@ class Service:
                 log.warning("drivers not all connected after %.0f s; running degraded",
                             self.cfg.loop.ready_timeout_s)
             self.notifier.ready("running" if up else "running degraded: drivers not all up")
-        if self.notifier.watchdog_due() and self._healthy():
-            self.notifier.watchdog()
+        notifier = self.notifier
+        if notifier.watchdog_s is not None and notifier.watchdog_due() and self._healthy():
+            notifier.watchdog()  # (no watchdog, as in every replay: not even the call)
 
     def _published(self, joints_only: bool) -> None:
         """A message went out: the readings waiting for it have had their effect."""

@@ -80,3 +80,29 @@ def test_stop_wakes_a_sleeping_live_loop() -> None:
     stop.set()
     th.join(2)
     assert not th.is_alive() and time.monotonic() - t0 < 0.5
+
+
+def test_tick_work_percentiles_with_the_all_zero_shortcut() -> None:
+    """The health message's tick work is what sorting the ring gives, whether the ring
+    holds only zeros (a simulated clock: the shortcut) or a tick with work, inside the
+    ring or just leaving it."""
+    import random
+
+    from shoveld.daemon.loop import LoopStats, percentiles
+
+    rng = random.Random(3)
+    for window in (1, 5, 50):
+        for pattern in range(40):
+            st = LoopStats(window=window)
+            works: list[float] = []
+            for _ in range(rng.randrange(1, 3 * window + 3)):
+                w = rng.choice([0.0, 0.0, 0.0, rng.random() * 1e-3])
+                works.append(w)
+                st.record(0.0, w)
+                recent = works[-window:]
+                (w50, w99), wmax = percentiles(recent)
+                want = {"p50": round(1e3 * w50, 3), "p99": round(1e3 * w99, 3),
+                        "max": round(1e3 * wmax, 3)}
+                got = st.as_dict(100.0, simulated=True)["tick_work_ms"]
+                assert got == want and [repr(x) for x in got.values()] == \
+                    [repr(x) for x in want.values()], (window, pattern, works)

@@ -1,0 +1,124 @@
+"""Instructions per 10 ms tick of ``replay --fast`` (callgrind): figures the load cannot move.
+
+On this shared 2-core machine the wall-clock speed of the replay swings by a quarter
+from run to run with what else runs; the instructions it executes do not. Each figure
+is the difference of two processes under ``valgrind --tool=callgrind`` (hash seed
+fixed) that do the same setup, one of them also the part measured, divided by the
+replay's ticks:
+
+* ``play``: ``ReplayRun.run`` on the committed capture (the bulk front end, the loop,
+  the engine, the pass log, Zenoh);
+* ``without engine``: the same play with ``Engine.step`` replaced by the results it
+  gave in a first play (the front end, the loop's bookkeeping, the health message);
+* ``front end``: the bulk feed's spans made alone, without the loop.
+
+Zenoh's and OpenBLAS's own threads add a little that varies: two runs of the same
+code differ by up to about 1 % (1,000 instructions a tick).
+
+Usage: ``.venv/bin/python bench/replay_instructions.py [--tree DIR ...] [--parts play,...]``
+(each ``--tree`` a source tree, e.g. a ``git archive`` of the code before; default
+this one). Needs valgrind; about a minute per part and tree.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PARTS = {"play": ("setup", "play"), "without engine": ("record", "stubbed"),
+         "front end": ("build", "front")}
+
+
+def child(tree: Path, mode: str) -> None:
+    """One measured process: the setup, and the part ``mode`` names."""
+    import logging
+    import threading
+
+    from shoveld.daemon.config import parse_config
+    from shoveld.daemon.replay import fast_replay_service
+    from shoveld.model.params import load_params
+
+    logging.disable(logging.WARNING)
+    cap = tree / "hil_fixtures" / "captures" / "daemon-e2e"
+    params = load_params(cap / "params.toml")
+
+    def make() -> object:
+        cfg = parse_config({"shovel": {"id": "bench", "params": str(cap / "params.toml"),
+                                       "state_dir": tempfile.mkdtemp()},
+                            "zenoh": {"listen": []}, "truck": {"target_kg": 62000.0}},
+                           require_devices=False)
+        return fast_replay_service(cap, cfg, params)
+
+    rr = make()
+    svc = rr.service  # type: ignore[attr-defined]
+    ticks = 0
+    if mode in ("record", "stubbed"):  # a first play records what the engine gave
+        svc.start()
+        results: list[object] = []
+        step = svc.engine.step
+        svc.engine.step = lambda s: results.append(step(s)) or results[-1]
+        rr.run(threading.Event())  # type: ignore[attr-defined]
+        svc.flush()
+        rr.close()  # type: ignore[attr-defined]
+        rr = make()
+        svc = rr.service  # type: ignore[attr-defined]
+        svc.start()
+        nxt = iter(results).__next__
+        svc.engine.step = lambda s: nxt()
+        if mode == "stubbed":
+            ticks = rr.run(threading.Event())["ticks"]  # type: ignore[attr-defined]
+    elif mode == "front":
+        ticks = sum(len(span.samples) for span in svc.assembler.feed.spans())
+    elif mode != "build":
+        svc.start()
+        if mode == "play":
+            ticks = rr.run(threading.Event())["ticks"]  # type: ignore[attr-defined]
+    svc.flush()
+    print(f"ticks {ticks}")
+    sys.stdout.flush()
+    os._exit(0)  # no teardown to count
+
+
+def instructions(tree: Path, mode: str) -> tuple[int, int]:
+    """Instructions of one child process under callgrind, and the ticks it played."""
+    with tempfile.TemporaryDirectory() as tmp:
+        env = {**os.environ, "PYTHONHASHSEED": "0", "PYTHONPATH": str(tree)}
+        r = subprocess.run(["valgrind", "--tool=callgrind",
+                            f"--callgrind-out-file={tmp}/cg.out", sys.executable, __file__,
+                            "--child", str(tree), mode],
+                           capture_output=True, text=True, env=env, check=True)
+    m = re.search(r"Collected : (\d+)", r.stderr)
+    t = re.search(r"ticks (\d+)", r.stdout)
+    if m is None or t is None:
+        raise RuntimeError(f"callgrind gave no count:\n{r.stderr[-2000:]}")
+    return int(m.group(1)), int(t.group(1))
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--tree", type=Path, action="append",
+                    help="a source tree to measure (repeatable; default this one)")
+    ap.add_argument("--parts", default=",".join(PARTS),
+                    help=f"comma-separated, of: {', '.join(PARTS)}")
+    ap.add_argument("--child", nargs=2, help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.child:
+        child(Path(args.child[0]), args.child[1])
+        return 0
+    for tree in args.tree or [ROOT]:
+        for part in args.parts.split(","):
+            base, measured = PARTS[part]
+            (n1, ticks), (n0, _) = instructions(tree, measured), instructions(tree, base)
+            print(f"{tree}: {part}: {(n1 - n0) / ticks:,.0f} instructions a tick "
+                  f"({ticks} ticks)", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
