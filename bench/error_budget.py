@@ -13,9 +13,9 @@ Two tables, on realistic simulated machines (``shoveld.sim.machine``):
 
     .venv/bin/python bench/error_budget.py [--machines 6] [--passes 60]
                                            [--ablate 20] [--jobs 2]
-                                           [--window S --polyorder N] [--angle-noise]
+                                           [--window S --polyorder N] [--no-angle-noise]
 
-``--window``/``--polyorder``/``--angle-noise``: the identification's options, as in
+``--window``/``--polyorder``/``--[no-]angle-noise``: the identification's options, as in
 ``bench/payload_accuracy.py``.
 """
 

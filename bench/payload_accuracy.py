@@ -18,12 +18,13 @@ beside the ideal simulator:
     .venv/bin/python bench/payload_accuracy.py [--machines 18] [--passes 60]
                                                [--coverage 120] [--jobs 2]
                                                [--window S --polyorder N]
-                                               [--angle-noise]
+                                               [--no-angle-noise]
 
 ``--window``/``--polyorder`` set the angles' Savitzky-Golay smoothing of identification
 (the engine follows what the params record); docs/engine.md, "Smoothing".
-``--angle-noise`` identifies with the angles' errors-in-variables correction
-(``calibrate --angle-noise``, off by default); docs/engine.md, "The angles' noise".
+``--no-angle-noise`` identifies without the angles' errors-in-variables correction
+(``calibrate --no-angle-noise``; on by default since 2026-11-26); docs/engine.md, "The
+angles' noise".
 """
 
 from __future__ import annotations
@@ -53,14 +54,15 @@ def add_identification_args(ap: argparse.ArgumentParser) -> None:
     """The identification's options (``calibrate``'s), for this bench and its siblings."""
     ap.add_argument("--window", type=float, help="smoothing window, s (default: calibrate's)")
     ap.add_argument("--polyorder", type=int, help="smoothing order (default: calibrate's)")
-    ap.add_argument("--angle-noise", action="store_true",
-                    help="identify with the angles' errors-in-variables correction")
+    ap.add_argument("--angle-noise", action=argparse.BooleanOptionalAction,
+                    help="the angles' errors-in-variables correction (default: calibrate's, "
+                         "on; --no-angle-noise: off)")
 
 
 def identification_options(args: argparse.Namespace) -> dict[str, Any]:
     """Calibrator keywords of the options given (for ``_init`` in each worker)."""
     return {k: v for k, v in (("window_s", args.window), ("polyorder", args.polyorder),
-                              ("position_noise", args.angle_noise or None))
+                              ("position_noise", args.angle_noise))
             if v is not None}
 
 

@@ -49,12 +49,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--angle-drift", type=float, default=ANGLE_DRIFT_DEG, metavar="DEG",
                    help="slow drift of the handle-angle sensor within a file (1 sigma, "
                         "from its data sheet), counted in the standard errors; 0: not")
-    p.add_argument("--angle-noise", action="store_true",
+    p.add_argument("--angle-noise", action=argparse.BooleanOptionalAction, default=True,
                    help="correct the fit for the handle angle's and the crowd extension's "
-                        "noise (errors in variables). Off by default: over 120 simulated "
-                        "machines it cut K_C's bias from +0.51 to +0.33 standard errors but "
-                        "moved J's from -0.38 to +0.31; with --window 1.15 --polyorder 7 "
-                        "as well, J +0.11 and every bias under 0.37 (docs/engine.md)")
+                        "noise (errors in variables; default). --no-angle-noise: the fit as "
+                        "before 2026-11-26, whose K_C leant +0.51 standard errors over 120 "
+                        "simulated machines (docs/engine.md)")
     p.add_argument("--json", action="store_true", help="print the report as JSON")
     p.add_argument("--plot", metavar="DIR",
                    help="write PNG plots of the fit (residuals, exclusions) per file")

@@ -32,7 +32,12 @@ SWING_EXCITED_RAD_S = 0.1
 
 
 class DiagCalibrator(Calibrator):
-    """The project's ``Calibrator``, fed the diagnosis's prepared data for a fold."""
+    """The project's ``Calibrator``, fed the diagnosis's prepared data for a fold.
+
+    Its candidate fits leave the angles' noise in (``position_noise=False``): the
+    correction moves parameters by fractions of a standard error, far below what an
+    effect the diagnosis names does to the fit, and made each case half as slow again
+    (48.5 against 32.6 s; docs/diagnosis.md). ``calibrate --verified`` asks for it."""
 
     def __init__(self, model: Model, dataset: DataSet, train: set[int] | None,
                  method: str = "output", angle_drift_deg: float = ANGLE_DRIFT_DEG,
@@ -52,7 +57,7 @@ def calibrate_with_verified(model: Model, trials: list[SignalsTable],
                             window_s: float = DEFAULT_WINDOW_S,
                             polyorder: int = DEFAULT_POLYORDER,
                             angle_drift_deg: float = ANGLE_DRIFT_DEG,
-                            position_noise: bool = False) -> tuple[Calibrator, int, int]:
+                            position_noise: bool = True) -> tuple[Calibrator, int, int]:
     """Identify ``model`` on the trials plus every scale-verified pass of the ``verified``
     tables (``shoveld calibrate --verified``): the passes bring a full dipper's currents,
     which the trials lack. Returns the fitted calibrator, the verified passes used and

@@ -289,14 +289,13 @@ class Calibrator:
     angle_drift_deg: float = ANGLE_DRIFT_DEG
     """The handle-angle sensor's slow drift within a file (1 sigma), counted in the
     standard errors; 0 leaves it out."""
-    position_noise: bool = False
+    position_noise: bool = True
     """Correct the fit for the handle angle's and the crowd extension's noise (errors in
-    variables, :func:`position_noise_errors`). Off by default: over 120 simulated
-    machines it cut K_C's bias from +0.51 to +0.33 standard errors but moved J's from
-    -0.38 to +0.31 (+0.55 on the tests' 20 machines) and the 60 A field knot's to -0.54
-    there. J's lean is the smoothing's own bias, which the noise hid: with a 7th-order
-    fit over 1.15 s as well, J +0.11 and every bias under 0.37 over 120 machines, but
-    the 60 A knot at -0.52 on the tests' machines (docs/engine.md, "What moved J")."""
+    variables, :func:`position_noise_errors`). On by default since 2026-11-26 (sixth
+    session), with the 7th-order smoothing over 1.0 s (``shoveld.kinematics``): left
+    in, the noise biased K_C by +0.51 standard errors over 120 simulated machines
+    (docs/engine.md, "The smoothing's bias on the fast strokes"). False: the fit as
+    before, for comparison."""
     files_: list[FileData] = field(default_factory=list, init=False)
     params_: ModelParams | None = field(default=None, init=False)
     output_fit_: output_error.OutputFit | None = field(default=None, init=False)

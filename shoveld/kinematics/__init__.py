@@ -5,13 +5,17 @@ recorded in the params file: both must differentiate the angles the same way, or
 the inertia terms identified from one disagree with the accelerations of the other.
 """
 
-DEFAULT_WINDOW_S = 0.82
+DEFAULT_WINDOW_S = 1.0
 """Savitzky-Golay window of the zero-phase joint rates, s."""
-DEFAULT_POLYORDER = 5
-"""Its polynomial order. A cubic over 0.5 s (the default until 2026-11-25) has the same
-noise gain on the acceleration but keeps only 84 % of it at 1 Hz (this fit 95 %): it
-flattened the fast strokes' peaks and biased the arm inertia J by +5 standard errors
-(3 %) and the payload by about +10 kg (docs/engine.md, "Smoothing")."""
+DEFAULT_POLYORDER = 7
+"""Its polynomial order. Every smoothing leaves a bias where the motion turns sharply,
+and the identification reads it as physics: a cubic over 0.5 s (the default until
+2026-11-25) kept only 84 % of a 1 Hz acceleration and biased the arm inertia J by +5
+standard errors; a 5th-order fit over 0.82 s (until 2026-11-26) leaned J and the
+field knots the fast strokes sweep by 0.2-0.4 standard errors with noise-free angles.
+This fit has the same noise on the acceleration as a 7th-order one over 1.15 s and
+about half that one's bias on the knots (docs/engine.md, "The smoothing's bias on the
+fast strokes")."""
 LEGACY_WINDOW_S, LEGACY_POLYORDER = 0.5, 3
 """What params files that do not record their smoothing were identified with."""
 

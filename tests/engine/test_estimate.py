@@ -117,17 +117,17 @@ def test_calibrate_takes_scale_verified_passes_with_the_trials(
     assert len(err.splitlines()) == 1
 
 
-def test_calibrate_corrects_for_the_angles_noise_on_request(tmp_path: Path) -> None:
-    """``--angle-noise``: the fit takes the handle angle's and the crowd extension's noise
-    out (errors in variables) and records the noise it took, which is the simulated
-    sensors' (0.03 deg, 2 mm); without it, the file says nothing of it."""
+def test_calibrate_corrects_for_the_angles_noise_by_default(tmp_path: Path) -> None:
+    """The fit takes the handle angle's and the crowd extension's noise out (errors in
+    variables) and records the noise it took, which is the simulated sensors' (0.03 deg,
+    2 mm); with ``--no-angle-noise`` it does not, and the file says nothing of it."""
     e, l = str(tmp_path / "e.csv"), str(tmp_path / "l.csv")
     p0, p1 = str(tmp_path / "p0.toml"), str(tmp_path / "p1.toml")
     for args in (["--load", "0", "--seed", "5", "--out", e],
                  ["--load", "8420", "--seed", "6", "--out", l]):
         assert main(["sim", "--scenario", "calibration", *args]) == 0
-    assert main(["calibrate", "--out", p0, e, l]) == 0
-    assert main(["calibrate", "--angle-noise", "--out", p1, e, l]) == 0
+    assert main(["calibrate", "--no-angle-noise", "--out", p0, e, l]) == 0
+    assert main(["calibrate", "--out", p1, e, l]) == 0
     plain, corrected = load_params(p0), load_params(p1)
     assert "position_noise" not in plain.fit
     took = corrected.fit["position_noise"]
