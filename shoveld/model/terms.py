@@ -100,6 +100,29 @@ class Term:
         return f"{type(self).__name__}({self.hyper})" if self.hyper else type(self).__name__
 
 
+_F8 = np.dtype(np.float64)
+
+
+def pair(x: np.ndarray, y: np.ndarray, axis: int = -1) -> np.ndarray:
+    """``np.stack([x, y], axis=axis)``: for two float64 arrays of one shape (1-D, or 2-D
+    stacked on axis 1) the two copied into one new array, without ``np.stack``'s dozen
+    Python-level calls (a payload block of ten rows makes eight of these); the same
+    array, values and layout. Anything else goes to ``np.stack``."""
+    if type(x) is np.ndarray and type(y) is np.ndarray and x.dtype == _F8 \
+            and y.dtype == _F8 and x.shape == y.shape:
+        if x.ndim == 1 and (axis == -1 or axis == 1):
+            out = np.empty((x.shape[0], 2))
+            out[:, 0] = x
+            out[:, 1] = y
+            return out
+        if x.ndim == 2 and axis == 1:
+            out = np.empty((x.shape[0], 2, x.shape[1]))
+            out[:, 0] = x
+            out[:, 1] = y
+            return out
+    return np.stack([x, y], axis=axis)
+
+
 def _stack(*eqs: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
     """Columns given as (th_eq, d_eq) pairs -> (N, 2, P)."""
     out = np.empty((len(eqs[0][0]), 2, len(eqs)))
@@ -113,7 +136,7 @@ def payload_phi(k: Kinematics) -> np.ndarray:
     """(N, 2): the payload as a point mass at the bail, per kilogram."""
     th_eq = k.d * k.d * k.thdd + 2.0 * k.d * k.dd * k.thd + k.d * G * np.cos(k.th)
     d_eq = k.ddd - k.d * k.thd * k.thd + G * np.sin(k.th)
-    return np.stack([th_eq, d_eq], axis=-1)
+    return pair(th_eq, d_eq)
 
 
 @register_term
@@ -270,7 +293,7 @@ class _Linear:
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         f = (x - self.a) / (self.b - self.a)
-        return np.stack([1.0 - f, f], axis=1)
+        return pair(1.0 - f, f, axis=1)
 
 
 BLOCK_ROWS = 64
@@ -402,7 +425,7 @@ class HoistDrive(Term):
         h = self._basis(k)
         u_th = -k.d * k.sin_a3 * i_h
         u_d = k.cos_a3 * i_h
-        return np.stack([u_th[:, None] * h, u_d[:, None] * h], axis=1)
+        return pair(u_th[:, None] * h, u_d[:, None] * h, axis=1)
 
     def current_derivative(self, k: Kinematics) -> tuple[np.ndarray, np.ndarray]:
         """d(columns)/d(i_H) and d(columns)/d(i_C)."""
