@@ -98,7 +98,12 @@ class CurrentEquations:
 
     def jacobian(self, p: np.ndarray, m: np.ndarray | float) -> np.ndarray:
         """(N, 2, P): d residual / d p (exact, the model being linear in p per equation)."""
-        m = np.broadcast_to(np.asarray(m, dtype=float), (len(self),))
+        if type(m) is float:  # the live engine's one payload: the same values as
+            mv = np.empty(len(self))  # broadcast_to's view, at a tenth of its cost
+            mv.fill(m)
+            m = mv
+        else:
+            m = np.broadcast_to(np.asarray(m, dtype=float), (len(self),))
         if self.has_psi:
             a0 = self.w0 + m[:, None] * self.psi0
             a1 = self.w1 + m[:, None] * self.psi1

@@ -124,7 +124,9 @@ def pair(x: np.ndarray, y: np.ndarray, axis: int = -1) -> np.ndarray:
 
 
 def _stack(*eqs: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
-    """Columns given as (th_eq, d_eq) pairs -> (N, 2, P)."""
+    """Columns given as (th_eq, d_eq) pairs -> (N, 2, P), float64 whatever the pairs' type
+    (so the terms' zero columns are ``np.zeros(shape)``: ``np.zeros_like``'s Python
+    wrapper cost several times the ten-row array, seven times a payload block)."""
     out = np.empty((len(eqs[0][0]), 2, len(eqs)))
     for j, (th_eq, d_eq) in enumerate(eqs):
         out[:, 0, j] = th_eq
@@ -430,7 +432,7 @@ class HoistDrive(Term):
     def current_derivative(self, k: Kinematics) -> tuple[np.ndarray, np.ndarray]:
         """d(columns)/d(i_H) and d(columns)/d(i_C)."""
         d_h = self.current_columns(k, np.ones(len(k)))
-        return d_h, np.zeros_like(d_h)
+        return d_h, np.zeros(d_h.shape)
 
 
 @register_term
@@ -444,11 +446,11 @@ class CrowdDrive(Term):
     base = True
 
     def columns(self, k: Kinematics) -> np.ndarray:
-        return _stack((np.zeros_like(k.d), -k.i_c))
+        return _stack((np.zeros(k.d.shape), -k.i_c))
 
     def current_derivative(self, k: Kinematics) -> tuple[np.ndarray, np.ndarray]:
-        z = np.zeros_like(k.d)
-        return _stack((z, z)), _stack((z, -np.ones_like(z)))
+        z = np.zeros(k.d.shape)
+        return _stack((z, z)), _stack((z, -np.ones(z.shape)))
 
 
 @register_term
@@ -462,7 +464,7 @@ class ArmInertia(Term):
     base = True
 
     def columns(self, k: Kinematics) -> np.ndarray:
-        return _stack((k.thdd, np.zeros_like(k.thdd)))
+        return _stack((k.thdd, np.zeros(k.thdd.shape)))
 
 
 @register_term
@@ -476,7 +478,7 @@ class Friction(Term):
     base = True
 
     def columns(self, k: Kinematics) -> np.ndarray:
-        z = np.zeros_like(k.thd)
+        z = np.zeros(k.thd.shape)
         return _stack((k.thd, z), (smooth_sign(k.thd, SIGN_EPS_TH), z),
                       (z, k.dd), (z, smooth_sign(k.dd, SIGN_EPS_D)))
 
@@ -488,7 +490,7 @@ class Friction(Term):
         both leave it anywhere between -fc and +fc. Read the smoothed sign tanh(v / eps)
         as the sign's expected value; a sign of +-1 with that mean has standard deviation
         sech(v / eps), 1 at standstill and under 0.04 beyond four widths."""
-        z = np.zeros_like(k.thd)
+        z = np.zeros(k.thd.shape)
         return _stack((_sech(k.thd / SIGN_EPS_TH), z), (z, _sech(k.dd / SIGN_EPS_D)))
 
 

@@ -184,3 +184,30 @@ def test_pair_is_np_stack(shape: tuple[int, ...], axis: int) -> None:
     for a, b in ((z, y), (x.astype(np.float32), y), (x, y.astype(int))):
         assert pair(a, b, axis).tobytes() == np.stack([a, b], axis=axis).tobytes()
         assert pair(a, b, axis).dtype == np.stack([a, b], axis=axis).dtype
+
+
+def test_jacobian_of_a_float_payload_is_the_broadcast_one() -> None:
+    """``CurrentEquations.jacobian`` fills an array for a Python float payload (the
+    engine's) instead of ``np.broadcast_to``: the same bits as the array path."""
+    from pathlib import Path
+
+    from shoveld.model.kin import Kinematics
+    from shoveld.model.output import CurrentEquations
+    from shoveld.model.params import load_params
+
+    params = load_params(Path(__file__).resolve().parents[2] / "hil_fixtures" / "captures"
+                         / "daemon-e2e" / "params.toml")
+    rng = np.random.default_rng(8)
+    n = 10
+    u = [rng.uniform(lo, hi, n) for lo, hi in ((-0.6, 0.6), (-0.5, 0.5), (-2, 2), (1.0, 2.5),
+                                               (-0.4, 0.4), (-1, 1), (200, 900), (-80, 80),
+                                               (55, 75))]
+    z = np.zeros(n)
+    k = Kinematics(t=np.arange(n) * 0.01, th=u[0], thd=u[1], thdd=u[2], d=u[3], dd=u[4],
+                   ddd=u[5], boom=np.full(n, np.radians(45.0)), i_h=u[6], i_c=u[7],
+                   i_hf=u[8], swing=z, swing_rate=z, swing_acc=z, roll=z, pitch=z)
+    ce = CurrentEquations(params.model(), k)
+    for m in (0.0, -0.0, 31014.3, 1e-300):
+        got = ce.jacobian(params.values, m)
+        want = ce.jacobian(params.values, np.full(n, m))
+        assert got.shape == want.shape and got.tobytes() == want.tobytes()
