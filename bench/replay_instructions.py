@@ -10,7 +10,12 @@ replay's ticks:
   the engine, the pass log, Zenoh);
 * ``without engine``: the same play with ``Engine.step`` replaced by the results it
   gave in a first play (the front end, the loop's bookkeeping, the health message);
-* ``front end``: the bulk feed's spans made alone, without the loop.
+* ``front end``: the bulk feed's spans made alone, without the loop;
+* ``engine alone``: a fresh ``Engine`` stepped over the samples a first play gave it
+  (nothing else runs in the measured part; the Zenoh and OpenBLAS threads are idle);
+* ``engine every tick``: the same with the payload blocks left out (``Engine._flush``
+  only clears the batch), so the joint filters, phase machine, fixed-lag window and
+  live estimate; the blocks are the two differenced.
 
 Zenoh's and OpenBLAS's own threads add a little that varies: two runs of the same
 code differ by up to about 1 % (1,000 instructions a tick).
@@ -32,7 +37,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 PARTS = {"play": ("setup", "play"), "without engine": ("record", "stubbed"),
-         "front end": ("build", "front")}
+         "front end": ("build", "front"), "engine alone": ("samples", "steps"),
+         "engine every tick": ("samples", "noblocks")}
 
 
 def child(tree: Path, mode: str) -> None:
@@ -73,6 +79,22 @@ def child(tree: Path, mode: str) -> None:
         svc.engine.step = lambda s: nxt()
         if mode == "stubbed":
             ticks = rr.run(threading.Event())["ticks"]  # type: ignore[attr-defined]
+    elif mode in ("samples", "steps", "noblocks"):  # a first play gives the samples
+        from shoveld.engine.loop import Engine
+
+        svc.start()
+        got: list[object] = []
+        step = svc.engine.step
+        svc.engine.step = lambda s: got.append(s) or step(s)
+        rr.run(threading.Event())  # type: ignore[attr-defined]
+        svc.flush()
+        engine = Engine(svc.engine.params, svc.engine.cfg)
+        if mode == "noblocks":
+            engine._flush = engine.batch.clear  # type: ignore[method-assign]
+        if mode != "samples":
+            for s in got:
+                engine.step(s)  # type: ignore[arg-type]
+            ticks = len(got)
     elif mode == "front":
         ticks = sum(len(span.samples) for span in svc.assembler.feed.spans())
     elif mode != "build":

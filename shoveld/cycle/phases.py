@@ -62,31 +62,43 @@ class PhaseMachine:
         c = self.cfg
         if th_deg != th_deg or thd_deg_s != thd_deg_s or swing_rate_deg_s != swing_rate_deg_s:
             return self.phase  # NaN: a joint is unknown, hold the phase
-        moving = (abs(thd_deg_s) > c.idle_rate_deg_s or abs(swing_rate_deg_s) > c.idle_swing_deg_s
-                  or abs(crowd_rate_m_s) > c.idle_crowd_m_s)
+        # |x| > k written as x > k or x < -k (and |x| < k as x < k and x > -k): the same
+        # truth for every x, NaN included, without a call at every tick
+        sw = swing_rate_deg_s
+        k = c.idle_rate_deg_s
+        if thd_deg_s > k or thd_deg_s < -k:
+            moving = True
+        else:
+            k = c.idle_swing_deg_s
+            moving = sw > k or sw < -k
+            if not moving:
+                k = c.idle_crowd_m_s
+                moving = crowd_rate_m_s > k or crowd_rate_m_s < -k
         if moving:
             self._still_since = None
         elif self._still_since is None:
             self._still_since = t
-        rising_from_tuck = th_deg < c.tuck_deg and thd_deg_s > c.rise_deg_s \
-            and abs(swing_rate_deg_s) < c.swing_on_deg_s
         p = self.phase
-        if p in (IDLE, RETURN):
-            if rising_from_tuck:
+        if p == IDLE or p == RETURN:
+            if th_deg < c.tuck_deg and thd_deg_s > c.rise_deg_s and sw < c.swing_on_deg_s \
+                    and sw > -c.swing_on_deg_s:  # rising from the tuck, inline
                 self._enter(DIG, t)
             elif p == RETURN and self._still_since is not None \
                     and t - self._still_since > c.idle_hold_s:
                 self._enter(IDLE, t)
         elif p == DIG:
-            if t - self.since >= c.min_dig_s and (th_deg > c.dig_exit_deg
-                                                  or abs(swing_rate_deg_s) > c.swing_on_deg_s):
-                self._enter(LIFT, t)
+            if t - self.since >= c.min_dig_s:
+                k = c.swing_on_deg_s
+                if th_deg > c.dig_exit_deg or sw > k or sw < -k:
+                    self._enter(LIFT, t)
         elif p == LIFT:
-            if abs(swing_rate_deg_s) > c.swing_on_deg_s:
-                self._swing_dir = math.copysign(1.0, swing_rate_deg_s)
+            k = c.swing_on_deg_s
+            if sw > k or sw < -k:
+                self._swing_dir = math.copysign(1.0, sw)
                 self._enter(SWING, t)
         elif p == SWING:
-            if abs(swing_rate_deg_s) < c.swing_off_deg_s:
+            k = c.swing_off_deg_s
+            if sw < k and sw > -k:
                 if self._slow_since is None:
                     self._slow_since = t
                 elif t - self._slow_since >= c.stop_hold_s:
@@ -94,10 +106,17 @@ class PhaseMachine:
             else:
                 self._slow_since = None
         elif p == DUMP:
-            if swing_rate_deg_s * self._swing_dir < -c.swing_on_deg_s or rising_from_tuck \
+            if sw * self._swing_dir < -c.swing_on_deg_s \
+                    or self._rising_from_tuck(th_deg, thd_deg_s, sw) \
                     or thd_deg_s < -4 * c.rise_deg_s:
                 self._enter(RETURN, t)
-        if p not in (IDLE, DIG) and self._still_since is not None \
+        if p != IDLE and p != DIG and self._still_since is not None \
                 and t - self._still_since > c.idle_hold_s:
             self._enter(IDLE, t)
         return self.phase
+
+    def _rising_from_tuck(self, th_deg: float, thd_deg_s: float, sw: float) -> bool:
+        """The dipper rises from the tuck (a dig starts), asked only where it matters."""
+        c = self.cfg
+        return th_deg < c.tuck_deg and thd_deg_s > c.rise_deg_s \
+            and sw < c.swing_on_deg_s and sw > -c.swing_on_deg_s

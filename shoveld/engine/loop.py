@@ -16,9 +16,20 @@ from typing import Any
 
 import numpy as np
 
-from shoveld.cycle.phases import DIG, DUMP, ESTIMATING, IDLE, PHASES, PhaseConfig, PhaseMachine
+from shoveld.cycle.phases import (
+    DIG,
+    DUMP,
+    ESTIMATING,
+    IDLE,
+    LIFT,
+    PHASES,
+    SWING,
+    PhaseConfig,
+    PhaseMachine,
+)
 from shoveld.kinematics import DEFAULT_POLYORDER, LEGACY_POLYORDER, LEGACY_WINDOW_S
-from shoveld.kinematics.causal import CROWD, HANDLE, SWING, JointFilter
+from shoveld.kinematics.causal import CROWD, HANDLE, JointFilter, update_joints
+from shoveld.kinematics.causal import SWING as SWING_JOINT
 from shoveld.kinematics.fixed_lag import FixedLagSavgol
 from shoveld.model.kin import Kinematics
 from shoveld.model.output import CurrentEquations, current_sigma
@@ -27,6 +38,13 @@ from shoveld.payload.rls import PayloadRls, RlsConfig
 from shoveld.payload.trucks import Truck
 from shoveld.sample import Sample
 from shoveld.words import n_of
+
+_all = np.logical_and.reduce
+_isfinite = np.isfinite
+_RAD = math.pi / 180.0
+"""math.radians's factor (CPython's ``degToRad``): ``x * _RAD`` is ``math.radians(x)``."""
+_DEG = 180.0 / math.pi
+"""math.degrees's factor (``radToDeg``): ``x * _DEG`` is ``math.degrees(x)``."""
 
 NEEDED = ("handle_deg", "crowd_m", "hoist1_a", "hoist2_a", "hoist_field_a", "crowd_a")
 """Signals without which a payload update is not made."""
@@ -132,7 +150,7 @@ class Engine:
         self.dt = dt
         self.f_th = JointFilter(HANDLE, dt)
         self.f_d = JointFilter(CROWD, dt)
-        self.f_sw = JointFilter(SWING, dt)
+        self.f_sw = JointFilter(SWING_JOINT, dt)
         self.batch: list[tuple[float, ...]] = []
         self._cached: tuple[int, float, float] = (-1, math.nan, math.nan)
         self.uses_field = any(getattr(t, "uses_field_current", False) for t in self.model.terms)
@@ -168,32 +186,32 @@ class Engine:
     # -- public -----------------------------------------------------------------------
     def step(self, s: Sample) -> list[Event]:
         """Process one sample; return the events it produced (always one LiveEstimate)."""
-        for f in self.streams:
-            s = f(s)
-        events: list[Event] = []
+        if self.streams:
+            for f in self.streams:
+                s = f(s)
         t = s.time_s
         bad = s.invalid
+        # x * _RAD and x * _DEG are math.radians and math.degrees (the same product with
+        # the same constant, so the same bits) without a call each
         if bad:
-            z_th = math.nan if "handle_deg" in bad else math.radians(s.handle_deg)
+            z_th = math.nan if "handle_deg" in bad else s.handle_deg * _RAD
             z_d = math.nan if "crowd_m" in bad else s.crowd_m
-            z_sw = math.nan if "swing_deg" in bad else math.radians(s.swing_deg)
+            z_sw = math.nan if "swing_deg" in bad else s.swing_deg * _RAD
         else:
-            z_th, z_d, z_sw = math.radians(s.handle_deg), s.crowd_m, math.radians(s.swing_deg)
-        th, thd, thdd = self.f_th.update(t, z_th)
-        d, dd, ddd = self.f_d.update(t, z_d)
-        sw, swd, swdd = self.f_sw.update(t, z_sw)
+            z_th, z_d, z_sw = s.handle_deg * _RAD, s.crowd_m, s.swing_deg * _RAD
+        th, thd, thdd, d, dd, ddd, sw, swd, swdd = update_joints(
+            self.f_th, self.f_d, self.f_sw, t, z_th, z_d, z_sw)
         phases = self.phases
         prev = phases.phase
         if self.t0 != self.t0:  # NaN: the first sample
             self.t0 = t
         if t - self.t0 >= self._warmup_s:
-            ph = phases.update(t, math.degrees(th), math.degrees(thd), math.degrees(swd), dd)
+            ph = phases.update(t, th * _DEG, thd * _DEG, swd * _DEG, dd)
         else:
             ph = prev
-        if ph != prev:
-            events.extend(self._transition(prev, ph, t))
+        events: list[Event] = self._transition(prev, ph, t) if ph != prev else []
         valid = False
-        estimating = ph in ESTIMATING
+        estimating = ph == LIFT or ph == SWING  # ph in ESTIMATING
         settled = estimating and t - self.dig_end >= self._settle_s
         lag = self.lagged
         if self._kalman_rates:
@@ -203,9 +221,15 @@ class Engine:
             if t - lag.last_t > lag.late:  # ticks the loop skipped: holes in the window
                 for _ in range(lag.gap(t)):
                     valid = self._lagged(lag.push_hole(), ph) or valid
-            valid = self._lagged(lag.push_tag(
-                t, (z_th, z_d, 0.0 if z_sw != z_sw else z_sw), (s, settled, self._cycle)),
-                ph) or valid
+            tag = lag.push_known(t, (z_th, z_d, 0.0 if z_sw != z_sw else z_sw),
+                                 (s, settled, self._cycle), z_th != z_th or z_d != z_d)
+            # _lagged's two common answers inline: no centre sample yet, or one that
+            # is not used (not settled, or not this cycle's)
+            if tag is None:
+                if estimating:
+                    self.invalid_updates += 1
+            elif tag[1] and tag[2] == self._cycle and self.rls is not None:
+                valid = self._lagged(tag, ph) or valid
         if self.batch and not estimating:
             self._flush()
         rls = self.rls
@@ -328,9 +352,12 @@ class Engine:
             a, b = ce.payload_equations(self.p)
             sig = current_sigma(self.current_noise, ce, self.p)
             jac = ce.jacobian(self.p, m)
-            ok = np.isfinite(a).all(axis=1) & np.isfinite(b).all(axis=1)
-            if not ok.all():
-                a, b, sig, jac = a[ok], b[ok], sig[ok], jac[ok]
+            # the rows' test only when a value is not finite (two ufuncs an array, without
+            # the ``all`` methods' Python wrappers: nearly every block is all finite)
+            if not (_all(_isfinite(a), None) and _all(_isfinite(b), None)):
+                ok = np.isfinite(a).all(axis=1) & np.isfinite(b).all(axis=1)
+                if not ok.all():
+                    a, b, sig, jac = a[ok], b[ok], sig[ok], jac[ok]
             self.rls.update(a, b, -jac, sigma=sig)
             return
         w, phi, psi = self.model.regressor(k)

@@ -165,3 +165,48 @@ class JointFilter:
             return q, v, a
         x = self.kf.x
         return float(x[0]), float(x[1]), float(x[2])
+
+
+def update_joints(fa: JointFilter, fb: JointFilter, fc: JointFilter, t: float, za: float,
+                  zb: float, zc: float) -> tuple[float, float, float, float, float, float,
+                                                 float, float, float]:
+    """Three filters fed the same tick: (q, q', q'') of each, in one tuple.
+
+    The live loop's joints at every tick: when all three are steady and get the next
+    sample with a value, their steady updates are done here in one call (the float
+    operations of :meth:`JointFilter.update`, in its order, so the same bits); anything
+    else goes through :meth:`JointFilter.update` one by one.
+    """
+    sa, sb, sc = fa._steady, fb._steady, fc._steady
+    last = fa._last_t
+    if (sa is not None and sb is not None and sc is not None and za == za and zb == zb
+            and zc == zc and last is not None and last == fb._last_t == fc._last_t
+            and not t - last > fa._late and fa.dt == fb.dt == fc.dt):
+        fa._last_t = fb._last_t = fc._last_t = t
+        dt = fa.dt
+        x = fa._qva
+        q, v, a = x
+        q, v = q + v * dt + 0.5 * a * dt * dt, v + a * dt
+        k0, k1, k2 = sa
+        e = za - q
+        x[0] = qa = q + k0 * e
+        x[1] = va = v + k1 * e
+        x[2] = aa = a + k2 * e
+        x = fb._qva
+        q, v, a = x
+        q, v = q + v * dt + 0.5 * a * dt * dt, v + a * dt
+        k0, k1, k2 = sb
+        e = zb - q
+        x[0] = qb = q + k0 * e
+        x[1] = vb = v + k1 * e
+        x[2] = ab = a + k2 * e
+        x = fc._qva
+        q, v, a = x
+        q, v = q + v * dt + 0.5 * a * dt * dt, v + a * dt
+        k0, k1, k2 = sc
+        e = zc - q
+        x[0] = qc = q + k0 * e
+        x[1] = vc = v + k1 * e
+        x[2] = ac = a + k2 * e
+        return qa, va, aa, qb, vb, ab, qc, vc, ac
+    return fa.update(t, za) + fb.update(t, zb) + fc.update(t, zc)

@@ -113,6 +113,12 @@ class FixedLagSavgol(Generic[T]):
         for v in values:
             if v != v:  # NaN
                 missing = True
+        return self.push_known(t, values, tag, missing)
+
+    def push_known(self, t: float, values: tuple[float, ...], tag: T, missing: bool
+                   ) -> T | None:
+        """:meth:`push_tag` for a caller that has tested its values for NaN already
+        (``missing``: one is): the live loop's push at every tick, in one call."""
         last = self.last_t
         if t - last > self.late:  # a gap not bridged: restart (NaN compares false)
             self._restart()
@@ -126,7 +132,18 @@ class FixedLagSavgol(Generic[T]):
             return self._write(None, tag)
         self._run = 0
         self.last_t = t
-        return self._write(values, tag)
+        # _write, inline for the common sample with values
+        rows = self._rows
+        if self._holes and len(rows) == self.window and rows[0] is None:
+            self._holes -= 1  # a hole leaves the window
+        rows.append(values)
+        self._unsynced += 1
+        self._count = count = self._count + 1
+        tags = self.tags
+        tags.append(tag)
+        if count < self.window:
+            return None
+        return tags[self.half]
 
     def _restart(self) -> None:
         """Forget the window: the next samples fill a new one."""

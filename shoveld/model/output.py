@@ -26,6 +26,7 @@ import numpy as np
 
 from shoveld.model.kin import Kinematics
 from shoveld.model.model import Model
+from shoveld.model.terms import pair
 
 CHANNELS: tuple[str, str] = ("hoist", "crowd")
 
@@ -51,7 +52,7 @@ class CurrentEquations:
         self.offsets = model.offset_index
         self.i_h = k.i_h
         self.i_c = k.i_c
-        self.acc = np.stack([k.thdd, k.ddd], axis=-1)
+        self.acc = pair(k.thdd, k.ddd)
         self.spread_idx, spread = model.column_spread(k)
         self.spread0 = np.ascontiguousarray(spread[:, 0, :])
         self.spread1 = np.ascontiguousarray(spread[:, 1, :])
@@ -85,8 +86,8 @@ class CurrentEquations:
         if self.has_psi:
             em0, em1 = em0 + self.psi0 @ p, em1 + self.psi1 @ p
         o_h, o_c = self._offsets(p)
-        a = np.stack([em0 / g_h, (em1 + c * em0) / g_c], axis=-1)
-        b = -np.stack([ew0 / g_h - o_h, (ew1 + c * ew0) / g_c - o_c], axis=-1)
+        a = pair(em0 / g_h, (em1 + c * em0) / g_c)
+        b = -pair(ew0 / g_h - o_h, (ew1 + c * ew0) / g_c - o_c)
         return a, b
 
     def residual(self, p: np.ndarray, m: np.ndarray | float) -> np.ndarray:
@@ -97,7 +98,12 @@ class CurrentEquations:
 
     def jacobian(self, p: np.ndarray, m: np.ndarray | float) -> np.ndarray:
         """(N, 2, P): d residual / d p (exact, the model being linear in p per equation)."""
-        m = np.broadcast_to(np.asarray(m, dtype=float), (len(self),))
+        if type(m) is float:  # the live engine's one payload: the same values as
+            mv = np.empty(len(self))  # broadcast_to's view, at a tenth of its cost
+            mv.fill(m)
+            m = mv
+        else:
+            m = np.broadcast_to(np.asarray(m, dtype=float), (len(self),))
         if self.has_psi:
             a0 = self.w0 + m[:, None] * self.psi0
             a1 = self.w1 + m[:, None] * self.psi1
@@ -129,12 +135,11 @@ class CurrentEquations:
         ps = p[self.spread_idx]
         s0 = self.spread0 * ps
         s1 = self.spread1 * ps + c[:, None] * s0
-        return np.stack([np.sum(s0 * s0, axis=1) / g_h**2,
-                         np.sum(s1 * s1, axis=1) / g_c**2], axis=-1)
+        return pair(np.sum(s0 * s0, axis=1) / g_h**2, np.sum(s1 * s1, axis=1) / g_c**2)
 
     def currents(self) -> np.ndarray:
         """(N, 2) the measured hoist (sum) and crowd currents these equations explain."""
-        return np.stack([self.i_h, self.i_c], axis=-1)
+        return pair(self.i_h, self.i_c)
 
 
 NOISE_KEYS = ("floor_a", "rel", "handle_acc_a", "crowd_acc_a", "tau")
