@@ -13,9 +13,10 @@ and the identification reads it as physics: a cubic over 0.5 s (the default unti
 2026-11-25) kept only 84 % of a 1 Hz acceleration and biased the arm inertia J by +5
 standard errors; a 5th-order fit over 0.82 s (until 2026-11-26) leaned J and the
 field knots the fast strokes sweep by 0.2-0.4 standard errors with noise-free angles.
-This fit has the same noise on the acceleration as a 7th-order one over 1.15 s and
-about half that one's bias on the knots (docs/engine.md, "The smoothing's bias on the
-fast strokes")."""
+This fit leaves about two thirds of a 7th-order fit's bias over 1.15 s on those knots
+and a third of it on J, for a third more noise on the acceleration (0.0150 against
+0.0113 rad/s^2 from the handle's 0.03 deg), which the angles' correction takes out of
+the identification (docs/engine.md, "The smoothing's bias on the fast strokes")."""
 LEGACY_WINDOW_S, LEGACY_POLYORDER = 0.5, 3
 """What params files that do not record their smoothing were identified with."""
 
