@@ -39,9 +39,14 @@ def savgol_coeffs(window: int, polyorder: int, deriv: int = 0, delta: float = 1.
         if len(x) <= polyorder:
             raise ValueError(f"savgol: {n_of(len(x), 'sample', 'samples')} kept, need more "
                              f"than order {polyorder}")
-    vander = x[None, :] ** np.arange(polyorder + 1)[:, None]
+    # Powers of x/scale, not of x: x**9 over +-40 samples spans 18 decades, and lstsq's
+    # cut-off then drops the high orders (scipy's savgol_coeffs does, and returned a
+    # 9th-order fit's value and acceleration wrong by 100 % over 81 samples). The
+    # weights are the same least-squares ones, the target rescaled to match.
+    scale = max(float(np.max(np.abs(x))), 1.0)
+    vander = (x / scale)[None, :] ** np.arange(polyorder + 1)[:, None]
     target = np.zeros(polyorder + 1)
-    target[deriv] = math.factorial(deriv) / delta**deriv
+    target[deriv] = math.factorial(deriv) / (delta * scale)**deriv
     coeffs, *_ = np.linalg.lstsq(vander, target, rcond=None)
     return coeffs
 
