@@ -18,10 +18,13 @@ beside the ideal simulator:
     .venv/bin/python bench/payload_accuracy.py [--machines 18] [--passes 60]
                                                [--coverage 120] [--jobs 2]
                                                [--window S --polyorder N]
+                                               [--payload-window S --payload-polyorder N]
                                                [--no-angle-noise]
 
-``--window``/``--polyorder`` set the angles' Savitzky-Golay smoothing of identification
-(the engine follows what the params record); docs/engine.md, "Smoothing".
+``--window``/``--polyorder`` set the angles' Savitzky-Golay smoothing of identification,
+``--payload-window``/``--payload-polyorder`` the payload equations' (recorded in the
+params, which the engine follows); docs/engine.md, "Smoothing" and "The payload's own
+smoothing".
 ``--no-angle-noise`` identifies without the angles' errors-in-variables correction
 (``calibrate --no-angle-noise``; on by default since 2026-11-26); docs/engine.md, "The
 angles' noise".
@@ -54,6 +57,10 @@ def add_identification_args(ap: argparse.ArgumentParser) -> None:
     """The identification's options (``calibrate``'s), for this bench and its siblings."""
     ap.add_argument("--window", type=float, help="smoothing window, s (default: calibrate's)")
     ap.add_argument("--polyorder", type=int, help="smoothing order (default: calibrate's)")
+    ap.add_argument("--payload-window", type=float,
+                    help="the payload equations' smoothing window, s (default: calibrate's)")
+    ap.add_argument("--payload-polyorder", type=int,
+                    help="the payload equations' smoothing order (default: calibrate's)")
     ap.add_argument("--angle-noise", action=argparse.BooleanOptionalAction,
                     help="the angles' errors-in-variables correction (default: calibrate's, "
                          "on; --no-angle-noise: off)")
@@ -62,6 +69,8 @@ def add_identification_args(ap: argparse.ArgumentParser) -> None:
 def identification_options(args: argparse.Namespace) -> dict[str, Any]:
     """Calibrator keywords of the options given (for ``_init`` in each worker)."""
     return {k: v for k, v in (("window_s", args.window), ("polyorder", args.polyorder),
+                              ("payload_window_s", args.payload_window),
+                              ("payload_polyorder", args.payload_polyorder),
                               ("position_noise", args.angle_noise))
             if v is not None}
 

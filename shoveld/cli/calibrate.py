@@ -11,7 +11,12 @@ from typing import TYPE_CHECKING
 from shoveld.cli import CliError
 from shoveld.cli.common import parse_effects, read_tables
 from shoveld.identify import ANGLE_DRIFT_DEG
-from shoveld.kinematics import DEFAULT_POLYORDER, DEFAULT_WINDOW_S
+from shoveld.kinematics import (
+    DEFAULT_POLYORDER,
+    DEFAULT_WINDOW_S,
+    PAYLOAD_POLYORDER,
+    PAYLOAD_WINDOW_S,
+)
 from shoveld.words import n_of
 
 if TYPE_CHECKING:
@@ -34,7 +39,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "payload_kg column holds the weighed payload through each such pass): "
                         "identified together with the trials, they bring a full dipper's "
                         "currents, which the trials lack (18 simulated machines with 24 such "
-                        "passes: payload RMS/CRB 1.58 -> 1.43, docs/engine.md)")
+                        "passes: payload RMS/CRB 1.51 -> 1.36, docs/engine.md)")
     p.add_argument("--out", required=True, help="params file to write (TOML)")
     p.add_argument("--method", choices=("output", "equation"), default="output",
                    help="output: currents as outputs, weighted by their noise (default); "
@@ -42,10 +47,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--effects", default="", metavar="NAME,...",
                    help="extension terms to add to the base model")
     p.add_argument("--window", type=float, default=DEFAULT_WINDOW_S,
-                   help="zero-phase smoothing window for rates, s (recorded in the params; "
-                        "the engine uses the same)")
+                   help="zero-phase smoothing window of the identification's rates, s "
+                        "(recorded in the params)")
     p.add_argument("--polyorder", type=int, default=DEFAULT_POLYORDER,
                    help="order of the Savitzky-Golay fit over that window")
+    p.add_argument("--payload-window", type=float, default=PAYLOAD_WINDOW_S, metavar="S",
+                   help="the payload equations' smoothing window, s, recorded in the params "
+                        "for the engine (lift and swing are slower than the trials' strokes; "
+                        "docs/engine.md, \"The payload's own smoothing\")")
+    p.add_argument("--payload-polyorder", type=int, default=PAYLOAD_POLYORDER, metavar="N",
+                   help="order of the payload equations' Savitzky-Golay fit")
     p.add_argument("--angle-drift", type=float, default=ANGLE_DRIFT_DEG, metavar="DEG",
                    help="slow drift of the handle-angle sensor within a file (1 sigma, "
                         "from its data sheet), counted in the standard errors; 0: not")
@@ -111,7 +122,9 @@ def _with_verified(model: Model, tables: list[SignalsTable], args: argparse.Name
     try:
         cal, used, found = calibrate_with_verified(
             model, tables, read_tables(args.verified), args.method, args.window,
-            args.polyorder, args.angle_drift, position_noise=args.angle_noise)
+            args.polyorder, args.angle_drift, position_noise=args.angle_noise,
+            payload_window_s=args.payload_window,
+            payload_polyorder=args.payload_polyorder)
     except ValueError as e:
         raise CliError(f"--verified {' '.join(args.verified)}: {e}") from None
     print(f"identified with {n_of(used, 'verified pass', 'verified passes')} of {found} in "
@@ -132,6 +145,8 @@ def run(args: argparse.Namespace) -> int:
         else:
             cal = Calibrator(model=model, method=args.method, window_s=args.window,
                              polyorder=args.polyorder,
+                             payload_window_s=args.payload_window,
+                             payload_polyorder=args.payload_polyorder,
                              angle_drift_deg=args.angle_drift,
                              position_noise=args.angle_noise).fit(tables)
     except ValueError as e:

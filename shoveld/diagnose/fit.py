@@ -19,7 +19,12 @@ import numpy as np
 from shoveld.diagnose.data import DataSet, Pass
 from shoveld.identify import ANGLE_DRIFT_DEG
 from shoveld.identify.calibrate import Calibrator, FileData
-from shoveld.kinematics import DEFAULT_POLYORDER, DEFAULT_WINDOW_S
+from shoveld.kinematics import (
+    DEFAULT_POLYORDER,
+    DEFAULT_WINDOW_S,
+    PAYLOAD_POLYORDER,
+    PAYLOAD_WINDOW_S,
+)
 from shoveld.model.kin import Kinematics
 from shoveld.model.model import Model
 from shoveld.model.output import CurrentEquations, noise_sigma
@@ -38,9 +43,12 @@ class DiagCalibrator(Calibrator):
 
     def __init__(self, model: Model, dataset: DataSet, train: set[int] | None,
                  method: str = "output", angle_drift_deg: float = ANGLE_DRIFT_DEG,
-                 position_noise: bool = True) -> None:
+                 position_noise: bool = True, payload_window_s: float = PAYLOAD_WINDOW_S,
+                 payload_polyorder: int = PAYLOAD_POLYORDER) -> None:
         super().__init__(model=model, method=method, exclusion=dataset.exclusion,
                          window_s=dataset.window_s, polyorder=dataset.polyorder,
+                         payload_window_s=payload_window_s,
+                         payload_polyorder=payload_polyorder,
                          angle_drift_deg=angle_drift_deg, position_noise=position_noise)
         self.dataset = dataset
         self.train = train
@@ -54,7 +62,10 @@ def calibrate_with_verified(model: Model, trials: list[SignalsTable],
                             window_s: float = DEFAULT_WINDOW_S,
                             polyorder: int = DEFAULT_POLYORDER,
                             angle_drift_deg: float = ANGLE_DRIFT_DEG,
-                            position_noise: bool = True) -> tuple[Calibrator, int, int]:
+                            position_noise: bool = True,
+                            payload_window_s: float = PAYLOAD_WINDOW_S,
+                            payload_polyorder: int = PAYLOAD_POLYORDER
+                            ) -> tuple[Calibrator, int, int]:
     """Identify ``model`` on the trials plus every scale-verified pass of the ``verified``
     tables (``shoveld calibrate --verified``): the passes bring a full dipper's currents,
     which the trials lack. Returns the fitted calibrator, the verified passes used and
@@ -65,7 +76,7 @@ def calibrate_with_verified(model: Model, trials: list[SignalsTable],
         raise ValueError("no pass with a verified payload (the payload_kg column must hold "
                          "the weighed payload through each verified pass)")
     cal = DiagCalibrator(model, ds, train, method, angle_drift_deg,
-                         position_noise).fit(ds.calib)
+                         position_noise, payload_window_s, payload_polyorder).fit(ds.calib)
     return cal, len(train), len(ds.passes)
 
 

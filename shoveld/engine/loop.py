@@ -27,7 +27,12 @@ from shoveld.cycle.phases import (
     PhaseConfig,
     PhaseMachine,
 )
-from shoveld.kinematics import DEFAULT_POLYORDER, LEGACY_POLYORDER, LEGACY_WINDOW_S
+from shoveld.kinematics import (
+    DEFAULT_POLYORDER,
+    LEGACY_POLYORDER,
+    LEGACY_WINDOW_S,
+    PAYLOAD_POLYORDER,
+)
 from shoveld.kinematics.causal import CROWD, HANDLE, JointFilter, update_joints
 from shoveld.kinematics.causal import SWING as SWING_JOINT
 from shoveld.kinematics.fixed_lag import FixedLagSavgol
@@ -64,10 +69,10 @@ class EngineConfig:
     """'fixed_lag' (zero-phase, half a window late) or 'kalman' (causal, biased by lag);
     kept for bench/kinematics_tradeoff.py, which measures the difference."""
     window_s: float | None = None
-    """Zero-phase window of the payload equations; None: the one the params were
-    identified with (the two must agree, or the inertia terms disagree by a few %)."""
+    """Zero-phase window of the payload equations; None: the one the params record for
+    them (:func:`smoothing`)."""
     polyorder: int | None = None
-    """Order of that Savitzky-Golay fit; None: as identified."""
+    """Order of that Savitzky-Golay fit; None: as the params record."""
     batch: int = 10
     """Samples per payload-filter update (one model evaluation and one filter update
     per block; the live payload moves in steps of this many ticks)."""
@@ -126,14 +131,19 @@ Event = LiveEstimate | PassResult | TruckResult
 
 def smoothing(params: ModelParams, cfg: EngineConfig) -> tuple[float, int]:
     """The Savitzky-Golay window and order of the payload equations: as configured, else
-    as recorded by the calibration, else what unrecorded params were identified with."""
+    the payload's own as recorded by the calibration (since 2026-11-26), else the
+    identification's as recorded, else what unrecorded params were identified with (so
+    an older params file estimates as it did)."""
     fit = params.fit or {}
-    recorded = "window_s" in fit
-    window = cfg.window_s if cfg.window_s is not None else float(
-        fit["window_s"] if recorded else LEGACY_WINDOW_S)
-    order = cfg.polyorder if cfg.polyorder is not None else int(
-        fit.get("polyorder", DEFAULT_POLYORDER) if recorded else LEGACY_POLYORDER)
-    return window, order
+    if "payload_window_s" in fit:
+        rec: tuple[float, int] = (float(fit["payload_window_s"]),
+                                  int(fit.get("payload_polyorder", PAYLOAD_POLYORDER)))
+    elif "window_s" in fit:
+        rec = (float(fit["window_s"]), int(fit.get("polyorder", DEFAULT_POLYORDER)))
+    else:
+        rec = (LEGACY_WINDOW_S, LEGACY_POLYORDER)
+    return (cfg.window_s if cfg.window_s is not None else rec[0],
+            cfg.polyorder if cfg.polyorder is not None else rec[1])
 
 
 class Engine:

@@ -22,7 +22,13 @@ import numpy as np
 
 from shoveld.identify import ANGLE_DRIFT_DEG, output_error
 from shoveld.identify.output_error import fit_output
-from shoveld.kinematics import DEFAULT_POLYORDER, DEFAULT_WINDOW_S, window_samples
+from shoveld.kinematics import (
+    DEFAULT_POLYORDER,
+    DEFAULT_WINDOW_S,
+    PAYLOAD_POLYORDER,
+    PAYLOAD_WINDOW_S,
+    window_samples,
+)
 from shoveld.kinematics.offline import difference_noise, offline_kinematics
 from shoveld.model.kin import Kinematics
 from shoveld.model.model import EQUATIONS, Model
@@ -286,6 +292,10 @@ class Calibrator:
     """Zero-phase smoothing of the joint angles (recorded in the params; the engine uses
     the same)."""
     polyorder: int = DEFAULT_POLYORDER
+    payload_window_s: float = PAYLOAD_WINDOW_S
+    """The payload equations' own smoothing, recorded for the engine: lift and swing are
+    slower than the trials' strokes, and a longer fit there is less noisy."""
+    payload_polyorder: int = PAYLOAD_POLYORDER
     angle_drift_deg: float = ANGLE_DRIFT_DEG
     """The handle-angle sensor's slow drift within a file (1 sigma), counted in the
     standard errors; 0 leaves it out."""
@@ -373,7 +383,9 @@ class Calibrator:
                              "homogeneous, a known-load trial is needed to fix the scale")
         p, cov, sigma = self._fit_equation(w_all, y_all)
         fit: dict[str, Any] = {"method": method, "samples": int(len(w_all)),
-                               "window_s": self.window_s, "polyorder": self.polyorder}
+                               "window_s": self.window_s, "polyorder": self.polyorder,
+                               "payload_window_s": self.payload_window_s,
+                               "payload_polyorder": self.payload_polyorder}
         current_noise: dict[str, list[float]] = {}
         if method == "output":
             files = [f for f in self.files_ if f.use.any()]

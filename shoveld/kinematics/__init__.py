@@ -1,8 +1,11 @@
 """Joint rates and accelerations: zero-phase offline, Kalman-filtered live.
 
-The smoothing below is shared by identification and the payload equations, and
-recorded in the params file: both must differentiate the angles the same way, or
-the inertia terms identified from one disagree with the accelerations of the other.
+Two smoothings, both recorded in the params file. Identification's must follow the
+calibration trials' fast strokes, where the inertia terms and the field knots are
+seen, so it is a high-order fit over a short window. The payload equations' runs
+over lift and swing, slower motions where a longer, lower-order fit leaves less
+noise on the acceleration than it adds bias (docs/engine.md, "The payload's own
+smoothing").
 """
 
 DEFAULT_WINDOW_S = 1.0
@@ -17,6 +20,12 @@ This fit leaves about two thirds of a 7th-order fit's bias over 1.15 s on those 
 and a third of it on J, for a third more noise on the acceleration (0.0150 against
 0.0113 rad/s^2 from the handle's 0.03 deg), which the angles' correction takes out of
 the identification (docs/engine.md, "The smoothing's bias on the fast strokes")."""
+PAYLOAD_WINDOW_S = 1.5
+"""Savitzky-Golay window of the payload equations' rates (live and offline), s."""
+PAYLOAD_POLYORDER = 5
+"""Its order. Chosen on 18 simulated machines among 16 windows and orders (RMS/CRB
+1.58 with identification's 1.0 s 7th-order fit, 1.51 with this one) and checked on 36
+others it was not chosen on (docs/engine.md, "The payload's own smoothing")."""
 LEGACY_WINDOW_S, LEGACY_POLYORDER = 0.5, 3
 """What params files that do not record their smoothing were identified with."""
 

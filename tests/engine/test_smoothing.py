@@ -1,4 +1,5 @@
-"""The angles' smoothing: recorded with the fitted parameters, followed by the engine."""
+"""The angles' smoothings (identification's, the payload's): recorded with the fitted
+parameters, followed by the engine."""
 
 from __future__ import annotations
 
@@ -10,29 +11,61 @@ import pytest
 
 from shoveld.engine.loop import Engine, EngineConfig
 from shoveld.identify.calibrate import Calibrator
-from shoveld.kinematics import LEGACY_POLYORDER, LEGACY_WINDOW_S
+from shoveld.kinematics import (
+    DEFAULT_POLYORDER,
+    DEFAULT_WINDOW_S,
+    LEGACY_POLYORDER,
+    LEGACY_WINDOW_S,
+    PAYLOAD_POLYORDER,
+    PAYLOAD_WINDOW_S,
+)
 from shoveld.kinematics.fixed_lag import FixedLagSavgol
 from shoveld.model.params import ModelParams, load_params, save_params
 from shoveld.sim.scenario import SimResult
 
 
-def test_the_engine_differentiates_as_the_calibration_did(
+def test_the_engine_smooths_as_the_params_record(
         calib_trials: tuple[SimResult, SimResult], tmp_path: Path) -> None:
-    cal = Calibrator(window_s=0.82, polyorder=5).fit([r.table for r in calib_trials])
+    """The identification's smoothing and the payload equations' own are both recorded;
+    the engine takes the payload's."""
+    cal = Calibrator(window_s=0.82, polyorder=5, payload_window_s=1.2,
+                     payload_polyorder=3).fit([r.table for r in calib_trials])
     assert cal.params_ is not None
     save_params(tmp_path / "p.toml", cal.params_)
     p = load_params(tmp_path / "p.toml")
     assert p.fit["window_s"] == 0.82 and p.fit["polyorder"] == 5
+    assert p.fit["payload_window_s"] == 1.2 and p.fit["payload_polyorder"] == 3
     e = Engine(p)
-    assert (e.window_s, e.polyorder, e.lagged.window) == (0.82, 5, 41)
+    assert (e.window_s, e.polyorder, e.lagged.window) == (1.2, 3, 61)
     # configured explicitly, the configuration wins
     assert Engine(p, EngineConfig(window_s=0.5, polyorder=3)).lagged.window == 25
+
+
+def test_the_calibration_records_the_payloads_smoothing_by_default(params: ModelParams
+                                                                  ) -> None:
+    e = Engine(params)
+    assert (e.window_s, e.polyorder) == (PAYLOAD_WINDOW_S, PAYLOAD_POLYORDER)
+    assert (params.fit["window_s"], params.fit["polyorder"]) == (DEFAULT_WINDOW_S,
+                                                                 DEFAULT_POLYORDER)
+
+
+def test_params_from_before_the_payloads_own_smoothing_estimate_as_they_did(
+        params: ModelParams) -> None:
+    """A params file that records only the identification's smoothing (written before
+    2026-11-26, seventh session) is estimated with it, as it was."""
+    old = dataclasses.replace(params, fit={k: v for k, v in params.fit.items()
+                                           if not k.startswith("payload_")}
+                              | {"window_s": 0.82, "polyorder": 5})
+    e = Engine(old)
+    assert (e.window_s, e.polyorder) == (0.82, 5)
 
 
 def test_params_that_do_not_say_are_read_as_identified_before_it_was_recorded(
         params: ModelParams) -> None:
     old = dataclasses.replace(params, fit={k: v for k, v in params.fit.items()
-                                           if k not in ("window_s", "polyorder")})
+                                           if k not in ("window_s", "polyorder",
+                                                        "payload_window_s",
+                                                        "payload_polyorder")})
     e = Engine(old)
     assert (e.window_s, e.polyorder) == (LEGACY_WINDOW_S, LEGACY_POLYORDER)
 
