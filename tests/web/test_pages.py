@@ -40,6 +40,9 @@ class Run:
     def __init__(self, tmp: Path, table: SignalsTable, params: ModelParams) -> None:
         import zenoh
 
+        # The browser first: without Chromium this fails at once, before any thread is
+        # started that nothing would stop (the run used to hang there).
+        self.browser = open_browser()
         self.port = free_port()
         endpoint = f"tcp/127.0.0.1:{self.port}"
         self.clock = ReplayClock(0.0, speed=SPEED)
@@ -72,7 +75,6 @@ class Run:
         self.state.set_link("up", endpoint)
         self.cab.query_status()
         self.page = ThreadedScreen(self.state)
-        self.browser = open_browser()
 
     def text(self, element_id: str) -> str:
         return str(self.browser.find_element("id", element_id).text)
