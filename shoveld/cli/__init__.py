@@ -56,7 +56,25 @@ class _Help(argparse.HelpFormatter):
         return text
 
 
-def build_parser() -> argparse.ArgumentParser:
+def _named_command(argv: list[str]) -> str | None:
+    """The subcommand module ``argv`` names, if its first word after the global options
+    is one: the global options (``-v``, ``--version``, ``-h``) take no value, so that
+    word is the command. None when there is none or it is not a subcommand."""
+    for word in argv:
+        if word == "--":
+            return None
+        if not word.startswith("-"):
+            name = word.replace("-", "_")
+            return name if name in SUBCOMMANDS else None
+    return None
+
+
+def build_parser(only: str | None = None) -> argparse.ArgumentParser:
+    """The whole command line; with ``only`` (a name in ``SUBCOMMANDS``), just that
+    subcommand: importing every subcommand's module (argument types, choices, their
+    own imports) was 30-60 ms of every command's start, and a command line that names
+    its subcommand parses the same with the others absent. ``--help``, a missing or an
+    unknown command get the full parser (its list of commands and its error)."""
     p = argparse.ArgumentParser(
         prog="shoveld",
         description="Onboard payload monitor for electric cable (rope) mining shovels.")
@@ -69,7 +87,7 @@ def build_parser() -> argparse.ArgumentParser:
         kw.setdefault("formatter_class", _Help)
         return add(name, **kw)  # type: ignore[arg-type]
     sub.add_parser = add_parser  # type: ignore[method-assign]
-    for name in SUBCOMMANDS:
+    for name in SUBCOMMANDS if only is None else (only,):
         try:
             mod = importlib.import_module(f"shoveld.cli.{name}")
         except ModuleNotFoundError as e:
@@ -81,7 +99,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    if argv is None:
+        argv = sys.argv[1:]
+    parser = build_parser(_named_command(argv))
     args = parser.parse_args(argv)
     level = logging.WARNING - 10 * min(args.verbose, 2)
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s",

@@ -119,6 +119,9 @@ def build_config(args: argparse.Namespace, state_dir: Path) -> tuple[DaemonConfi
 
 
 def run(args: argparse.Namespace) -> int:
+    from shoveld.cli.common import one_blas_thread
+
+    one_blas_thread()  # before the daemon's imports bring numpy
     from drivers.capture.format import CaptureFormatError
     from shoveld.daemon.logs import setup_logging
     from shoveld.daemon.replay import fast_replay_service, replay_service
@@ -154,6 +157,8 @@ def run(args: argparse.Namespace) -> int:
                       f"({msg['fill_pct']} %), {msg['status']}", flush=True)
 
         rr.service.on_event = on_event
+        # a temporary pass log is removed below: syncing it to disk protects nothing
+        rr.service.durable_pass_log = tmp is None
         stop = threading.Event()
         from shoveld.cli.run import install_stop_signals
 
