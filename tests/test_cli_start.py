@@ -95,3 +95,24 @@ def test_replay_keeps_openblas_to_one_thread_unless_told(given: str | None,
                        env={**env, "PYTHONPATH": str(ROOT)}, cwd=ROOT, timeout=120)
     got = json.loads(r.stdout.strip().splitlines()[-1])
     assert got == {"rc": 2, "numpy_before": False, "numpy_after": True, "threads": expected}
+
+
+def test_a_fast_replay_loads_no_module_it_does_not_use() -> None:
+    """The whole ``shoveld replay --fast`` (to 2 s of the capture): no other subcommand,
+    no socket module (systemd's notify socket is opened only under systemd), no pymodbus
+    (the in-memory Modbus client needs it only for a recorded timeout), no scipy."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    got = _in_fresh_python(
+        "import json, sys\n"
+        "from shoveld.cli import main\n"
+        f"rc = main(['replay', {str(CAPTURE)!r}, '--fast', '--until', '2',\n"
+        f"           '--listen', 'tcp/127.0.0.1:{port}'])\n"
+        "mods = set(sys.modules)\n"
+        "print(json.dumps({'rc': rc, 'loaded': sorted(m for m in mods if m in\n"
+        "    ('socket', 'pymodbus', 'scipy', 'filterpy') or m.startswith('shoveld.cli.'))}))")
+    assert got == {"rc": 0, "loaded": ["shoveld.cli.common", "shoveld.cli.replay",
+                                       "shoveld.cli.run"]}
