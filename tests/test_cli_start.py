@@ -116,3 +116,30 @@ def test_a_fast_replay_loads_no_module_it_does_not_use() -> None:
         "    ('socket', 'pymodbus', 'scipy', 'filterpy') or m.startswith('shoveld.cli.'))}))")
     assert got == {"rc": 0, "loaded": ["shoveld.cli.common", "shoveld.cli.replay",
                                        "shoveld.cli.run"]}
+
+
+def test_the_replay_program_ends_at_once_with_its_output_and_nothing_left(
+        tmp_path: Path) -> None:
+    """Run as the program, ``replay`` ends the process as soon as it returns: every line
+    still reaches a pipe (block-buffered, no PYTHONUNBUFFERED), the status is the
+    command's, and its temporary pass log is gone; a rejected command line still exits 2."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}
+    env.update(PYTHONPATH=str(ROOT), TMPDIR=str(tmp_path))
+    r = subprocess.run([sys.executable, "-m", "shoveld", "replay", str(CAPTURE), "--fast",
+                        "--json", "--listen", f"tcp/127.0.0.1:{port}"],
+                       capture_output=True, text=True, env=env, cwd=ROOT, timeout=120)
+    assert r.returncode == 0, r.stderr
+    lines = [json.loads(x) for x in r.stdout.splitlines()]
+    assert [m["payload_kg"] for m in lines if m["topic"] == "pass"] == [
+        31014.3, 29513.7, 32955.7]
+    assert lines[-1]["topic"] == "replay" and lines[-1]["capture_s"] > 100
+    assert list(tmp_path.iterdir()) == []  # the temporary state folder was removed
+    r = subprocess.run([sys.executable, "-m", "shoveld", "replay", str(CAPTURE), "--fast",
+                        "--params", str(tmp_path / "none.toml")],
+                       capture_output=True, text=True, env=env, cwd=ROOT, timeout=120)
+    assert r.returncode == 2 and "none.toml" in r.stderr

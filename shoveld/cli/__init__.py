@@ -10,7 +10,9 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import sys
+from typing import NoReturn
 
 SUBCOMMANDS: tuple[str, ...] = (
     "sim", "calibrate", "estimate", "diagnose", "decode", "record", "replay", "run",
@@ -98,7 +100,28 @@ def build_parser(only: str | None = None) -> argparse.ArgumentParser:
     return p
 
 
+def _exit_at_once(code: int) -> NoReturn:
+    """End the process now, with ``code``, once stdout, stderr and the log are flushed.
+
+    For a command that has closed and removed everything it opened (``replay``: the
+    pass log, the Zenoh session, its temporary folder): the interpreter's own shutdown
+    would only collect and free what the run left - the capture's recording, the
+    engine's state, some 55,000 tracked objects - and tear down numpy and Zenoh, 30-60
+    ms of a 0.45 s ``shoveld replay --fast`` on this machine."""
+    logging.shutdown()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # a closed pipe, a closed stream: nothing to keep
+            pass
+    os._exit(code)
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run the command line ``argv`` (default: this program's arguments). Called as the
+    program (no ``argv``), a command that says it leaves nothing to shut down
+    (``exit_at_once`` in its defaults) ends the process when it returns."""
+    program = argv is None
     if argv is None:
         argv = sys.argv[1:]
     parser = build_parser(_named_command(argv))
@@ -107,7 +130,10 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s",
                         stream=sys.stderr)
     try:
-        return int(args.func(args) or 0)
+        code = int(args.func(args) or 0)
+        if program and getattr(args, "exit_at_once", False):
+            _exit_at_once(code)
+        return code
     except CliError as e:
         print(f"shoveld {args.command}: error: {e}", file=sys.stderr)
         return 2
@@ -119,8 +145,6 @@ def main(argv: list[str] | None = None) -> int:
         # OSError without a file name is not that, and keeps its traceback.
         if e.filename is None:
             raise
-        import os
-
         hint = ""
         parent = os.path.dirname(os.fspath(e.filename)) or "."
         if isinstance(e, FileNotFoundError) and not os.path.isdir(parent):

@@ -64,7 +64,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--keep-open", type=float, default=0.0, metavar="S",
                    help="stay on Zenoh this long after the end (late subscribers, queries)")
     p.add_argument("--json", action="store_true", help="JSON lines on stdout")
-    p.set_defaults(func=run)
+    # everything it opens is closed and removed before run returns (see run)
+    p.set_defaults(func=run, exit_at_once=True)
 
 
 def _pace(text: str) -> float:
