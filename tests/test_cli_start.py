@@ -100,7 +100,8 @@ def test_replay_keeps_openblas_to_one_thread_unless_told(given: str | None,
 def test_a_fast_replay_loads_no_module_it_does_not_use() -> None:
     """The whole ``shoveld replay --fast`` (to 2 s of the capture): no other subcommand,
     no socket module (systemd's notify socket is opened only under systemd), no pymodbus
-    (the in-memory Modbus client needs it only for a recorded timeout), no scipy."""
+    (the in-memory Modbus client needs it only for a recorded timeout), no scipy, no
+    uuid (the threaded replay's CAN bus names)."""
     import socket
 
     with socket.socket() as s:
@@ -114,7 +115,7 @@ def test_a_fast_replay_loads_no_module_it_does_not_use() -> None:
         "mods = set(sys.modules)\n"
         "import gc\n"
         "print(json.dumps({'rc': rc, 'gc': gc.isenabled(), 'loaded': sorted(\n"
-        "    m for m in mods if m in ('socket', 'pymodbus', 'scipy', 'filterpy')\n"
+        "    m for m in mods if m in ('socket', 'pymodbus', 'scipy', 'filterpy', 'uuid')\n"
         "    or m.startswith('shoveld.cli.'))}))")
     assert got == {"rc": 0, "gc": True,  # the collector paused for the imports only
                    "loaded": ["shoveld.cli.common", "shoveld.cli.replay", "shoveld.cli.run"]}
