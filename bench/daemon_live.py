@@ -129,7 +129,12 @@ def cpu_by_thread(before: dict[int, float], after: dict[int, float], wall: float
 
 
 def start_py_spy(seconds: float, out: str) -> subprocess.Popen[bytes] | None:
+    # beside the interpreter (installed in its venv), else $PY_SPY or on the PATH
     exe = Path(sys.executable).with_name("py-spy")
+    if not exe.exists():
+        import shutil
+
+        exe = Path(os.environ.get("PY_SPY") or shutil.which("py-spy") or exe)
     if not exe.exists():
         print("--profile: py-spy not installed (pip install py-spy)", file=sys.stderr)
         return None

@@ -18,9 +18,11 @@ and line. Every reader raises :class:`CaptureFormatError`.
 from __future__ import annotations
 
 import datetime as _dt
+import itertools
 import json
 import logging
 import math
+import operator
 import os
 import re
 import threading
@@ -61,6 +63,10 @@ class SerialChunk:
     t: float
     direction: str
     data: bytes
+
+
+SerialColumns = tuple[list[float], list[str], list[bytes]]
+"""A serial recording as columns: each chunk's time, direction (``rx``/``tx``), bytes."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -127,6 +133,9 @@ class Capture:
 
     def serial_chunks(self, name: str) -> Iterator[SerialChunk]:
         return read_serial_chunks(self.file(name))
+
+    def serial_columns(self, name: str) -> SerialColumns:
+        return read_serial_columns(self.file(name))
 
     def modbus_reads(self, name: str) -> Iterator[RegisterRead]:
         return read_modbus_reads(self.file(name))
@@ -258,35 +267,61 @@ def _bulk_records(path: Path, expected: str, line: re.Pattern[str]
     if not isinstance(h, dict) or h.get("format") != expected or h.get("version") != 1:
         return None
     recs = line.findall(body)
-    # one match per line at most (anchored): as many matches as lines = every line matched
-    if len(recs) != sum(1 for ln in body.split("\n") if ln.strip()):
+    # One match per line at most (anchored): as many matches as lines = every line
+    # matched (a blank line never matches, so a file with one goes line by line).
+    lines = body.count("\n") + (not body.endswith("\n")) if body else 0
+    if len(recs) != lines:
         return None
     return recs
 
 
-def _fast_serial_chunks(path: Path) -> list[SerialChunk] | None:
+def _times_ok(times: list[float]) -> bool:
+    """Every time finite and none before the one above it (the readers' rule)."""
+    return all(map(math.isfinite, times)) and all(
+        map(operator.le, times, itertools.islice(times, 1, None)))
+
+
+def _fast_serial_columns(path: Path) -> SerialColumns | None:
     recs = _bulk_records(path, SERIAL_FORMAT, _SERIAL_LINE)
     if recs is None:
         return None
-    out = []
-    prev = -math.inf
-    isfinite, fromhex = math.isfinite, bytes.fromhex
+    if not recs:
+        return [], [], []
+    ts, ds, hs = zip(*recs, strict=True)
+    times = list(map(float, ts))
+    if not _times_ok(times):
+        return None
     try:
-        for ts, d, hx in recs:
-            t = float(ts)
-            if not (t >= prev and isfinite(t)):
-                return None
-            prev = t
-            out.append(SerialChunk(t, d, fromhex(hx)))
+        data = list(map(bytes.fromhex, hs))
     except ValueError:  # an odd number of hex digits
         return None
-    return out
+    return times, list(ds), data
+
+
+def _fast_serial_chunks(path: Path) -> list[SerialChunk] | None:
+    cols = _fast_serial_columns(path)
+    return None if cols is None else list(map(SerialChunk, *cols))
+
+
+def read_serial_columns(path: str | os.PathLike[str]) -> SerialColumns:
+    """The chunks of a ``*.serial.jsonl`` file as columns, in file (= time) order: what
+    :func:`read_serial_chunks` yields, without a :class:`SerialChunk` per chunk (the
+    fast replay keeps only the columns; the objects were a third of reading the file).
+    The same errors as :func:`read_serial_chunks`."""
+    p = Path(path)
+    cols = _fast_serial_columns(p)
+    if cols is not None:
+        return cols
+    chunks = list(read_serial_chunks(p, whole_file=False))
+    return [c.t for c in chunks], [c.direction for c in chunks], [c.data for c in chunks]
 
 
 def _fast_modbus_reads(path: Path) -> list[RegisterRead] | None:
     recs = _bulk_records(path, MODBUS_FORMAT, _MODBUS_LINE)
     if recs is None:
         return None
+    if recs and all(r[5] for r in recs):
+        return _answered_reads(recs)
     out = []
     prev = -math.inf
     isfinite = math.isfinite
@@ -311,6 +346,31 @@ def _fast_modbus_reads(path: Path) -> list[RegisterRead] | None:
         else:
             out.append(RegisterRead(t, unit, fc, addr, count, error="timeout"))
     return out
+
+
+def _answered_reads(recs: list[tuple[str, ...]]) -> list[RegisterRead] | None:
+    """:func:`_fast_modbus_reads` when every record holds words (no timeout, no
+    exception: a healthy module's recording), column by column: the few distinct
+    ``(unit, fc, addr, count)`` checked once each, the times and words by ``map`` (the
+    record-by-record loop was two thirds of reading such a file). The same records and
+    the same refusals (None) as the loop."""
+    ts, us, fs, As, cs, regs_s, _codes = zip(*recs, strict=True)
+    times = list(map(float, ts))
+    if not _times_ok(times):
+        return None
+    heads: dict[tuple[str, ...], tuple[int, int, int, int]] = {}
+    for key in set(zip(us, fs, As, cs, strict=True)):
+        unit, fc, addr, count = map(int, key)
+        if not (unit <= 255 and 3 <= fc <= 4 and addr <= 65535 and 1 <= count <= 125):
+            return None
+        heads[key] = (unit, fc, addr, count)
+    blocks = map(heads.__getitem__, zip(us, fs, As, cs, strict=True))
+    units, fcs, addrs, counts = zip(*blocks, strict=True)
+    regs = [tuple(map(int, r.split(","))) for r in regs_s]
+    if not (all(map(operator.eq, map(len, regs), counts))
+            and max(map(max, regs)) <= 65535):
+        return None
+    return list(map(RegisterRead, times, units, fcs, addrs, counts, regs))
 
 
 def read_serial_chunks(path: str | os.PathLike[str], whole_file: bool = True

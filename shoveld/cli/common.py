@@ -39,3 +39,18 @@ def read_params(path: str) -> ModelParams:
 def parse_effects(text: str | None) -> list[str]:
     """'a,b' -> ['a', 'b'] (blank entries dropped)."""
     return [e.strip() for e in (text or "").split(",") if e.strip()]
+
+
+def one_blas_thread() -> None:
+    """Tell numpy's OpenBLAS to start no worker threads, before numpy is imported (a
+    setting read once, when the library loads; one already set is kept).
+
+    The daemon's arrays are a few rows (3x3 joint filters, 10-row payload blocks): far
+    below the sizes at which OpenBLAS splits work between threads, so its threads never
+    run, but starting them was 40-60 ms of numpy's import on this 2-core machine
+    (90-160 ms against 60-90 ms) - a tenth of ``shoveld replay --fast`` on a 103 s
+    capture. Every event of the engine is the same with one thread or the default
+    (docs/daemon.md, the seventh session's section)."""
+    import os
+
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")

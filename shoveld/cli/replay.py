@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import logging
 import math
@@ -64,7 +65,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--keep-open", type=float, default=0.0, metavar="S",
                    help="stay on Zenoh this long after the end (late subscribers, queries)")
     p.add_argument("--json", action="store_true", help="JSON lines on stdout")
-    p.set_defaults(func=run)
+    # everything it opens is closed and removed before run returns (see run)
+    p.set_defaults(func=run, exit_at_once=True)
 
 
 def _pace(text: str) -> float:
@@ -119,9 +121,21 @@ def build_config(args: argparse.Namespace, state_dir: Path) -> tuple[DaemonConfi
 
 
 def run(args: argparse.Namespace) -> int:
-    from drivers.capture.format import CaptureFormatError
-    from shoveld.daemon.logs import setup_logging
-    from shoveld.daemon.replay import fast_replay_service, replay_service
+    from shoveld.cli.common import one_blas_thread
+
+    one_blas_thread()  # before the daemon's imports bring numpy
+    # No cyclic collection while the daemon's modules load (numpy, the engine, the
+    # drivers): what they make lives to the end, and the collector's passes over it
+    # were 5-10 ms of the command.
+    collecting = gc.isenabled()
+    gc.disable()
+    try:
+        from drivers.capture.format import CaptureFormatError
+        from shoveld.daemon.logs import setup_logging
+        from shoveld.daemon.replay import fast_replay_service, replay_service
+    finally:
+        if collecting:
+            gc.enable()
 
     setup_logging("DEBUG" if args.verbose > 1 else "INFO" if args.verbose else "WARNING")
     tmp = None
@@ -154,6 +168,8 @@ def run(args: argparse.Namespace) -> int:
                       f"({msg['fill_pct']} %), {msg['status']}", flush=True)
 
         rr.service.on_event = on_event
+        # a temporary pass log is removed below: syncing it to disk protects nothing
+        rr.service.durable_pass_log = tmp is None
         stop = threading.Event()
         from shoveld.cli.run import install_stop_signals
 

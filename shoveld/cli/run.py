@@ -38,6 +38,9 @@ def install_stop_signals(stop: threading.Event) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from shoveld.cli.common import one_blas_thread
+
+    one_blas_thread()  # before the daemon's imports bring numpy
     import dataclasses
     import sqlite3
     from pathlib import Path

@@ -24,20 +24,34 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
+import numpy as np
+
 from shoveld.daemon.clock import Clock
 
 
 def percentiles(values: list[float], ps: tuple[float, ...] = (50.0, 99.0)
                 ) -> tuple[list[float], float]:
     """(percentiles ``ps`` with linear interpolation, as numpy's default; maximum) of a
-    non-empty list - sorting a list of floats is cheaper than making an array of it."""
-    s = sorted(values)
-    n = len(s)
+    non-empty list of numbers (no NaN).
+
+    Only the order statistics the interpolation reads are put in place: a short list
+    is sorted, a long one is copied into an array and partitioned at them (the health
+    message's eight rings of 3,000-4,000 floats, once a second in the live daemon's
+    loop thread: 90 against 200 us a ring, the same floats and the same arithmetic)."""
+    n = len(values)
+    pos = [p / 100.0 * (n - 1) for p in ps]
+    if n < 64:
+        s: Any = sorted(values)
+    else:
+        a = np.array(values, dtype=float)
+        ks = sorted({k for q in pos for k in (int(q), min(int(q) + 1, n - 1))} | {n - 1})
+        a.partition(ks)
+        s = dict(zip(ks, a[ks].tolist(), strict=True))  # Python floats, as the list held
+        s[-1] = s[n - 1]
     out = []
-    for p in ps:
-        pos = p / 100.0 * (n - 1)
-        i = int(pos)
-        frac = pos - i
+    for q in pos:
+        i = int(q)
+        frac = q - i
         out.append(s[i] + (s[i + 1] - s[i]) * frac if frac and i + 1 < n else s[i])
     return out, s[-1]
 

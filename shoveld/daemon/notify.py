@@ -10,8 +10,11 @@ from __future__ import annotations
 
 import logging
 import os
-import socket
 import time
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import socket
 
 log = logging.getLogger(__name__)
 
@@ -48,6 +51,8 @@ class Notifier:
             addr = "\0" + addr[1:]  # abstract namespace socket
         try:
             if self._sock is None:
+                import socket  # here: outside systemd (replays, tests) never needed
+
                 self._sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM | socket.SOCK_CLOEXEC)
                 self._sock.setblocking(False)
             self._sock.sendto(msg.encode(), addr)

@@ -111,9 +111,13 @@ class Publisher:
 
     # -- session lifecycle -----------------------------------------------------------------
     def start(self, wait_s: float = 0.0) -> Publisher:
-        """Open the session in the background; optionally wait up to ``wait_s`` for it."""
-        self._thread = threading.Thread(target=self._connect, name="zenoh-open", daemon=True)
-        self._thread.start()
+        """Open the session in the background; optionally wait up to ``wait_s`` for it.
+        Started already (a fast replay opens it while it reads the capture): only the
+        wait."""
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._connect, name="zenoh-open",
+                                            daemon=True)
+            self._thread.start()
         if wait_s > 0:
             self.opened.wait(wait_s)
         return self

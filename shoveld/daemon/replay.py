@@ -26,6 +26,7 @@ from typing import Any
 
 from shoveld.daemon.clock import ReplayPacedClock, ReplayStepClock, SimClock
 from shoveld.daemon.config import DaemonConfig, DeviceConfig, device_signals
+from shoveld.daemon.publisher import Publisher
 from shoveld.daemon.service import Service
 from shoveld.daemon.syncreplay import SyncReplay
 from shoveld.installation import Installation
@@ -142,7 +143,23 @@ def fast_replay_service(capture_dir: str | Path, cfg: DaemonConfig, params: Mode
     engine allows. ``bulk``: each device decoded alone and the samples built with numpy
     ahead of the ticks (:mod:`shoveld.daemon.bulkfeed`); else the drivers, the store
     and the assembler run inside each tick (:class:`SyncReplay`), as live. Both give the
-    same samples and passes (tests/daemon/test_bulkfeed.py)."""
+    same samples and passes (tests/daemon/test_bulkfeed.py).
+
+    The Zenoh session starts opening first, in its thread, while the capture is read
+    (``Service.start`` then waits for it as usual): opening it is 5 ms that release the
+    GIL, which the command no longer waits for after the reading."""
+    publisher = Publisher(cfg.zenoh, cfg.shovel_id).start()
+    try:
+        return _fast_replay_service(capture_dir, cfg, params, publisher, record_stats,
+                                    close_truck_at_end, bulk)
+    except BaseException:
+        publisher.close()
+        raise
+
+
+def _fast_replay_service(capture_dir: str | Path, cfg: DaemonConfig, params: ModelParams,
+                         publisher: Publisher, record_stats: bool, close_truck_at_end: bool,
+                         bulk: bool) -> ReplayRun:
     from drivers.capture.format import read_capture
 
     cap = read_capture(Path(capture_dir))
@@ -159,8 +176,8 @@ def fast_replay_service(capture_dir: str | Path, cfg: DaemonConfig, params: Mode
     clock = SimClock(0.0, float(cap.start_unix))
     if not bulk:
         svc = Service(rcfg, params, clock=clock, driver_clock=sync.clock, drivers=sync.drivers,
-                      driver_threads=False, before_tick=sync.step, record_stats=record_stats,
-                      close_truck_at_end=close_truck_at_end)
+                      publisher=publisher, driver_threads=False, before_tick=sync.step,
+                      record_stats=record_stats, close_truck_at_end=close_truck_at_end)
         sync.attach({n: svc.store.sink(n, threaded=False) for n in devices})  # one thread
         return ReplayRun(svc, sync, None)
     from drivers.base import DriverHealth
@@ -168,7 +185,7 @@ def fast_replay_service(capture_dir: str | Path, cfg: DaemonConfig, params: Mode
 
     drivers: dict[str, Any] = {n: ReplayedDriver(n, DriverHealth()) for n in devices}
     svc = Service(rcfg, params, clock=clock, driver_clock=sync.clock, drivers=drivers,
-                  driver_threads=False, record_stats=record_stats,
+                  publisher=publisher, driver_threads=False, record_stats=record_stats,
                   close_truck_at_end=close_truck_at_end)
     feed = BulkFeed(sync, rcfg.installation, rcfg.loop.rate_hz, rcfg.loop.health_period_s)
     svc.assembler = BulkAssembler(feed, drivers, svc.store)  # type: ignore[assignment]

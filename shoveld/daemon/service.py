@@ -86,6 +86,9 @@ class Service:
         self.driver_threads = driver_threads
         self.before_tick = before_tick
         """Called with the tick time before assembly (fast replay steps its drivers here)."""
+        self.durable_pass_log = True
+        """False: the pass log is never synced to disk, for a state directory thrown away
+        at the end (``shoveld replay`` without ``--state-dir``); set before ``start``."""
         self.store = ReadingStore(cfg.devices)
         self.drivers: dict[str, Driver] = drivers if drivers is not None else {
             name: build_driver(dev, self.driver_clock) for name, dev in cfg.devices.items()}
@@ -216,7 +219,8 @@ class Service:
         """Open the pass log and restore the truck, start Zenoh and the drivers."""
         sys.setswitchinterval(0.001)  # let the loop thread get the GIL promptly
         cfg = self.cfg
-        self.passlog = PassLog(db_path(cfg.state_dir), cfg.shovel_id)
+        self.passlog = PassLog(db_path(cfg.state_dir), cfg.shovel_id,
+                               durable=self.durable_pass_log)
         r = self.passlog.restore()
         self.engine = Engine(self.params, cfg.engine, first_pass=r.next_pass, first_truck=r.truck,
                              truck_passes=r.truck_passes)
@@ -400,11 +404,12 @@ class Service:
                 self._q.task_done()
 
     def flush(self, timeout_s: float = 30.0) -> bool:
-        """Wait until every queued pass/truck is committed and published."""
-        end = time.monotonic() + timeout_s
-        while self._q.unfinished_tasks and time.monotonic() < end:
-            time.sleep(0.005)
-        return not self._q.unfinished_tasks
+        """Wait until every queued pass/truck is committed and published: woken by the
+        pass-log thread's last ``task_done`` (polling every 5 ms cost up to that much at
+        the end of every replay)."""
+        q = self._q
+        with q.all_tasks_done:
+            return q.all_tasks_done.wait_for(lambda: not q.unfinished_tasks, timeout_s)
 
     def _persist(self, item: tuple[Any, ...]) -> None:
         assert self.passlog is not None

@@ -23,6 +23,7 @@ same samples.
 from __future__ import annotations
 
 import bisect
+import functools
 import logging
 import math
 from collections import deque
@@ -60,10 +61,16 @@ class MemorySerial:
     """A pyserial-like port holding a recorded byte stream and its recorded answers."""
 
     def __init__(self, stream: list[tuple[float, bytes]], responder: Callable[[bytes], Any],
-                 port: str) -> None:
-        self.stream = stream
-        self._times = [c[0] for c in stream]
-        self._chunks = [c[1] for c in stream]
+                 port: str, *, columns: tuple[list[float], list[bytes]] | None = None
+                 ) -> None:
+        """``stream``: the recorded ``(time, bytes)`` chunks; or ``columns``, the same as
+        a list of times and one of bytes (as the capture's columns reader gives them),
+        with ``stream`` empty."""
+        if columns is not None:
+            self._times, self._chunks = columns
+        else:
+            self._times = [c[0] for c in stream]
+            self._chunks = [c[1] for c in stream]
         self.responder = responder
         self.port = port
         self.timeout = 0.0
@@ -95,17 +102,23 @@ class MemorySerial:
         """Count the chunks before ``j`` as released and read (a span reader took them)."""
         self._i = j
 
+    @functools.cached_property
+    def stream(self) -> list[tuple[float, bytes]]:
+        """The recorded chunks as ``(time, bytes)``, made when first asked for (tests
+        edit it, then set ``_times`` and ``_chunks``, which the port reads, from it)."""
+        return list(zip(self._times, self._chunks, strict=True))
+
     @property
     def exhausted(self) -> bool:
-        return self._i >= len(self.stream)
+        return self._i >= len(self._times)
 
     @property
     def first_t(self) -> float:
-        return self.stream[0][0] if self.stream else 0.0
+        return self._times[0] if self._times else 0.0
 
     @property
     def end_t(self) -> float:
-        return self.stream[-1][0] if self.stream else 0.0
+        return self._times[-1] if self._times else 0.0
 
     @property
     def in_waiting(self) -> int:
@@ -113,8 +126,8 @@ class MemorySerial:
 
     def read(self, n: int = 1) -> bytes:
         buf = self._buf
-        if not buf and self.lookahead and self._i < len(self.stream):
-            buf += self.stream[self._i][1]
+        if not buf and self.lookahead and self._i < len(self._chunks):
+            buf += self._chunks[self._i]
             self._i += 1
         if n >= len(buf):  # the usual case (drivers ask for in_waiting): one copy
             out = bytes(buf)
@@ -313,7 +326,11 @@ class SyncReplay:
     def __init__(self, capture_dir: str | Path | Capture, devices: dict[str, DeviceConfig],
                  clock: StepClock | None = None, answer_window_s: float = 0.05) -> None:
         from drivers.capture.format import CAN_KINDS, MODBUS_KINDS, SERIAL_KINDS, read_capture
-        from drivers.capture.replay import RecordedAnswers, RecordedRegisters, split_answers
+        from drivers.capture.replay import (
+            RecordedAnswers,
+            RecordedRegisters,
+            split_answer_columns,
+        )
 
         self.capture = (capture_dir if isinstance(capture_dir, Capture)  # already read
                         else read_capture(Path(capture_dir)))
@@ -325,9 +342,10 @@ class SyncReplay:
             entry = self.capture.devices[name]
             tr: Any
             if entry.kind in SERIAL_KINDS:
-                stream, pairs = split_answers(list(self.capture.serial_chunks(name)),
-                                              answer_window_s)
-                tr = MemorySerial(stream, RecordedAnswers(pairs), f"capture:{name}")
+                times, data, pairs = split_answer_columns(
+                    *self.capture.serial_columns(name), answer_window_s)
+                tr = MemorySerial([], RecordedAnswers(pairs), f"capture:{name}",
+                                  columns=(times, data))
                 transport = tr
                 drv = build_driver(dev, self.clock,
                                    serial_factory=lambda *a, _t=transport, **k: _t,

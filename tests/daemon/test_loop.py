@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 
@@ -106,3 +107,37 @@ def test_tick_work_percentiles_with_the_all_zero_shortcut() -> None:
                 got = st.as_dict(100.0, simulated=True)["tick_work_ms"]
                 assert got == want and [repr(x) for x in got.values()] == \
                     [repr(x) for x in want.values()], (window, pattern, works)
+
+
+def _percentiles_by_sorting(values: list[float], ps: tuple[float, ...]
+                            ) -> tuple[list[float], float]:
+    s = sorted(values)
+    n = len(s)
+    out = []
+    for p in ps:
+        pos = p / 100.0 * (n - 1)
+        i = int(pos)
+        frac = pos - i
+        out.append(s[i] + (s[i + 1] - s[i]) * frac if frac and i + 1 < n else s[i])
+    return out, s[-1]
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 63, 64, 65, 100, 101, 3000, 4000, 4001])
+def test_percentiles_are_those_of_the_sorted_list_bit_for_bit(n: int) -> None:
+    """The partition (long lists) reads the same order statistics as a full sort: the
+    same floats, whatever the ties, signs and percentiles asked."""
+    import random
+
+    from shoveld.daemon.loop import percentiles
+
+    rng = random.Random(n)
+    cases = [[rng.random() * 1e-3 for _ in range(n)],
+             [float(rng.randrange(5)) for _ in range(n)],  # many ties
+             [rng.gauss(0.0, 1.0) for _ in range(n)],
+             [0.25] * n]
+    for values in cases:
+        for ps in ((50.0, 99.0), (0.0, 100.0), (12.5, 50.0, 90.0, 99.9)):
+            got = percentiles(list(values), ps)
+            assert got == _percentiles_by_sorting(values, ps)
+            assert [math.copysign(1, x) for x in got[0]] == [
+                math.copysign(1, x) for x in _percentiles_by_sorting(values, ps)[0]]

@@ -182,3 +182,17 @@ def test_help_shows_defaults(capsys) -> None:
     out = " ".join(capsys.readouterr().out.split())
     assert "passes to dig (cycles) (default: 12)" in out and "(default: None)" not in out
     assert "--out FILE" in out and "required" in out
+
+
+def test_a_throwaway_pass_log_keeps_wal_and_restores_without_syncing(tmp_path: Path) -> None:
+    """``durable=False`` changes only the sync: WAL, schema, writes and restore as live."""
+    log = PassLog(db_path(tmp_path), "s1", durable=False)
+    assert log.con.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+    assert log.con.execute("PRAGMA synchronous").fetchone()[0] == 0  # OFF
+    log.write_pass(p(1, 1), T0, T0 + 8, 136000.0)
+    log.write_pass(p(2, 1), T0 + 10, T0 + 18, 136000.0)
+    log.close()
+    again = PassLog(db_path(tmp_path), "s1")  # the default: durable
+    assert again.con.execute("PRAGMA synchronous").fetchone()[0] == 2
+    r = again.restore()
+    assert r.next_pass == 3 and [x["pass"] for x in r.truck_passes] == [1, 2]

@@ -203,3 +203,44 @@ def test_restart_measures_the_truck_gap_on_the_boot_clock_not_wall_time(
 
     assert one_pass(1, clock.boot_stamp(clock.now() - 5.0) or "") == pytest.approx(5.0, abs=1.0)
     assert one_pass(2, f"not-this-boot {clock.now() - 5.0!r}") == pytest.approx(7200.0, abs=5.0)
+
+
+def test_a_throwaway_pass_log_is_not_synced_and_holds_the_same_passes(
+        tmp_path: Path, e2e_table: SignalsTable, params: ModelParams) -> None:
+    """``durable_pass_log = False`` (``shoveld replay`` without ``--state-dir``) skips the
+    fsyncs only: the same events, the same rows in the log; the default stays FULL."""
+    from shoveld.daemon.persist import db_path, read_passes
+
+    runs, syncs = [], []
+    for durable in (True, False):
+        got: list[dict[str, Any]] = []
+        cfg = make_cfg(tmp_path / str(durable))
+        svc, feed = table_service(e2e_table, cfg, params, close_truck_at_end=True)
+        assert svc.durable_pass_log is True  # the live default
+        svc.durable_pass_log = durable
+        svc.on_event = lambda k, m, got=got: got.append({"topic": k, **m})
+        svc.start()
+        assert svc.passlog is not None
+        syncs.append(svc.passlog.con.execute("PRAGMA synchronous").fetchone()[0])
+        assert svc.passlog.con.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+        svc.run(threading.Event(), done=lambda feed=feed: feed.finished)
+        t0 = time.monotonic()
+        assert svc.flush(timeout_s=10.0)
+        assert time.monotonic() - t0 < 5.0
+        svc.close()
+        rows = read_passes(db_path(cfg.state_dir))
+        runs.append((got, [(r["pass"], r["payload_kg"]) for r in rows]))
+    assert syncs == [2, 0]  # FULL, OFF
+    assert runs[0] == runs[1] and len(runs[0][1]) >= 3
+
+
+def test_flush_says_when_the_pass_log_did_not_catch_up(tmp_path: Path,
+                                                       e2e_table: SignalsTable,
+                                                       params: ModelParams) -> None:
+    """Nothing drains the queue before ``start``: flush waits its timeout and says so."""
+    svc, _feed = table_service(e2e_table, make_cfg(tmp_path), params)
+    assert svc.flush(timeout_s=0.05)  # nothing queued
+    svc._q.put(("truck", {}, False, 0.0))
+    t0 = time.monotonic()
+    assert not svc.flush(timeout_s=0.1)
+    assert 0.09 <= time.monotonic() - t0 < 5.0

@@ -217,6 +217,25 @@ def test_recorded_registers_follow_capture_time() -> None:
     assert rr(4, 5, 1) == 2 and rr(3, 0, 2) == 2  # never recorded -> illegal address
 
 
+def test_recorded_registers_of_two_blocks_interleaved() -> None:
+    now = {"t": 0.0}
+    reads = [RegisterRead(0.1, 1, 4, 0, 2, registers=(1, 2)),
+             RegisterRead(0.1, 1, 4, 8, 1, registers=(9,)),
+             RegisterRead(0.2, 1, 4, 0, 2, registers=(3, 4)),
+             RegisterRead(0.3, 1, 4, 8, 1, error="timeout")]
+    rr = RecordedRegisters(reads, lambda: now["t"])
+    assert rr.end_t == 0.3
+    assert rr.recorded((4, 0, 2)) == [reads[0], reads[2]]
+    assert rr.recorded((4, 8, 1)) == [reads[1], reads[3]]
+    now["t"] = 0.25
+    assert rr(4, 0, 2) == [3, 4] and rr(4, 8, 1) == [9]
+    now["t"] = 0.3
+    assert rr(4, 8, 1) is None
+    one = RecordedRegisters(reads[::2], lambda: 0.2)
+    assert one.recorded((4, 0, 2)) == reads[::2] and one.end_t == 0.2
+    assert RecordedRegisters([], lambda: 0.0).end_t == 0.0
+
+
 def test_replay_clock_paced() -> None:
     c = ReplayClock(10.0, speed=4.0)
     time.sleep(0.05)
@@ -273,3 +292,55 @@ def test_stepped_advance_waits_for_released_waiters_to_finish_their_step() -> No
     assert len(done) == 2
     stop.set()
     th.join()
+
+
+def _split_reference(chunks: list[SerialChunk], window: float
+                     ) -> tuple[list[tuple[float, bytes]], list[tuple[bytes, bytes]]]:
+    """split_answers as it was written first: a bisect for every rx chunk."""
+    import bisect
+
+    txs = [c for c in chunks if c.direction == "tx"]
+    tx_times = [c.t for c in txs]
+    stream: list[tuple[float, bytes]] = []
+    answers = [bytearray() for _ in txs]
+    for c in chunks:
+        if c.direction != "rx":
+            continue
+        i = bisect.bisect_right(tx_times, c.t) - 1
+        if i >= 0 and c.t - tx_times[i] <= window:
+            answers[i] += c.data
+        else:
+            stream.append((c.t, c.data))
+    return stream, [(txs[i].data, bytes(answers[i])) for i in range(len(txs))]
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_split_answer_columns_agree_with_a_bisect_per_chunk(seed: int) -> None:
+    """Writes early, late, in bursts, none at all; chunks on and around the window's
+    edge (times that round either way), equal times; the committed MTi recording."""
+    import random
+
+    from drivers.capture.format import read_serial_chunks
+    from drivers.capture.replay import split_answer_columns
+
+    rng = random.Random(seed)
+    if seed == 11:
+        cap = Path(__file__).resolve().parents[2] / "hil_fixtures" / "captures" / "daemon-e2e"
+        chunks = list(read_serial_chunks(cap / "mti.serial.jsonl"))
+    else:
+        t, chunks = rng.uniform(0, 50), []
+        for _ in range(rng.randrange(0, 400)):
+            r = rng.random()
+            if r < 0.1:
+                t += 0.0  # an equal time
+            elif r < 0.3:
+                t = t + 0.05 + rng.choice([-1e-16, 0.0, 1e-16, 1e-12])  # on the edge
+            else:
+                t += rng.uniform(0, 0.2)
+            d = "tx" if rng.random() < (0.3 if seed % 3 == 0 else 0.05) else "rx"
+            chunks.append(SerialChunk(t, d, rng.randbytes(rng.randrange(0, 5))))
+    cols = [c.t for c in chunks], [c.direction for c in chunks], [c.data for c in chunks]
+    st, sd, pairs = split_answer_columns(*cols, 0.05)
+    stream, ref_pairs = _split_reference(chunks, 0.05)
+    assert list(zip(st, sd, strict=True)) == stream and pairs == ref_pairs
+    assert split_answers(chunks, 0.05) == (stream, ref_pairs)

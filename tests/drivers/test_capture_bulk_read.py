@@ -90,3 +90,61 @@ def test_modbus_files_read_alike(name: str, tmp_path: Path) -> None:
     p.write_bytes((MODBUS_HEAD + MODBUS_CASES[name]).encode())
     whole, by_line = _both_ways(fmt.read_modbus_reads, p)
     assert whole == by_line
+
+
+def _columns_outcome(path: Path) -> tuple[Any, str]:
+    try:
+        return fmt.read_serial_columns(path), ""
+    except fmt.CaptureFormatError as e:
+        return None, str(e)
+
+
+def _columns_of(path: Path) -> tuple[Any, str]:
+    """The line-by-line reader's chunks as columns, or its error."""
+    got, err = _outcome(fmt.read_serial_chunks, path, False)
+    if err:
+        return None, err
+    return ([c.t for c in got], [c.direction for c in got], [c.data for c in got]), ""
+
+
+@pytest.mark.parametrize("path", sorted(CAPTURES.glob("*/*.serial.jsonl")),
+                         ids=lambda p: p.name)
+def test_committed_serial_recordings_read_alike_as_columns(path: Path) -> None:
+    cols, err = _columns_outcome(path)
+    assert not err and cols[0] and (cols, err) == _columns_of(path)
+    assert fmt._fast_serial_columns(path) is not None  # the whole-file path was taken
+
+
+@pytest.mark.parametrize("name", sorted(SERIAL_CASES))
+def test_serial_files_read_alike_as_columns(name: str, tmp_path: Path) -> None:
+    p = tmp_path / "x.serial.jsonl"
+    p.write_bytes((SERIAL_HEAD + SERIAL_CASES[name]).encode())
+    assert _columns_outcome(p) == _columns_of(p)
+
+
+ANSWERED_CASES = {
+    "two blocks": '{"t":0.1,"unit":1,"fc":4,"addr":0,"count":2,"regs":[0,65535]}\n'
+                  '{"t":0.1,"unit":1,"fc":3,"addr":8,"count":1,"regs":[7]}\n'
+                  '{"t":0.2,"unit":1,"fc":4,"addr":0,"count":2,"regs":[1,2]}\n',
+    "back in time": '{"t":0.2,"unit":1,"fc":4,"addr":0,"count":1,"regs":[1]}\n'
+                    '{"t":0.1,"unit":1,"fc":4,"addr":0,"count":1,"regs":[1]}\n',
+    "one short answer": '{"t":0.1,"unit":1,"fc":4,"addr":0,"count":2,"regs":[1,2]}\n'
+                        '{"t":0.2,"unit":1,"fc":4,"addr":0,"count":2,"regs":[1]}\n',
+    "a word too big later": '{"t":0.1,"unit":1,"fc":4,"addr":0,"count":1,"regs":[1]}\n'
+                            '{"t":0.2,"unit":1,"fc":4,"addr":0,"count":1,"regs":[70000]}\n',
+    "a bad block later": '{"t":0.1,"unit":1,"fc":4,"addr":0,"count":1,"regs":[1]}\n'
+                         '{"t":0.2,"unit":300,"fc":4,"addr":0,"count":1,"regs":[1]}\n',
+    "count 126": '{"t":0.1,"unit":1,"fc":4,"addr":0,"count":126,"regs":['
+                 + ",".join(["1"] * 126) + "]}\n",
+    "huge time": '{"t":1e999,"unit":1,"fc":4,"addr":0,"count":1,"regs":[1]}\n',
+    "empty": "",
+}
+
+
+@pytest.mark.parametrize("name", sorted(ANSWERED_CASES))
+def test_modbus_files_of_answers_only_read_alike(name: str, tmp_path: Path) -> None:
+    """Files where every record holds words take the column-by-column path."""
+    p = tmp_path / "x.modbus.jsonl"
+    p.write_bytes((MODBUS_HEAD + ANSWERED_CASES[name]).encode())
+    whole, by_line = _both_ways(fmt.read_modbus_reads, p)
+    assert whole == by_line

@@ -147,3 +147,24 @@ def test_the_schedule_is_the_drivers_own() -> None:
     assert 590 <= len(a[0]) <= 610
     assert a == b
     assert np.all(np.diff([r[0] for r in a[0]]) >= 3)
+
+
+@pytest.mark.parametrize("case", ["answers", "mixed", "none answered", "empty"])
+def test_a_blocks_arrays_hold_each_reads_words_and_outcome(case: str) -> None:
+    """``_block``: row i is read i's words when it answered with ``count`` words, zeros
+    otherwise (a timeout, an exception, a short answer), whatever the mix."""
+    from drivers.modbus_adc.span import _block
+
+    ok = [RegisterRead(0.02 * i, 1, 4, 0, 3, registers=(i, 65535 - i, 7)) for i in range(6)]
+    bad = [RegisterRead(0.5, 1, 4, 0, 3, error="timeout"),
+           RegisterRead(0.6, 1, 4, 0, 3, error="exception", exception_code=6),
+           RegisterRead(0.7, 1, 4, 0, 3, registers=(1, 2))]
+    reads = {"answers": ok, "mixed": ok[:2] + bad + ok[2:], "none answered": bad,
+             "empty": []}[case]
+    b = _block(reads, 3)
+    assert b.words.dtype == np.int64 and b.words.shape == (len(reads), 3)
+    assert b.times.dtype == float and b.times.tolist() == [r.t for r in reads]
+    for i, r in enumerate(reads):
+        good = r.registers is not None and len(r.registers) == 3
+        assert bool(b.answered[i]) is good
+        assert b.words[i].tolist() == (list(r.registers) if good else [0, 0, 0])
