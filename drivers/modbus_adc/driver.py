@@ -37,7 +37,6 @@ from drivers.base import DeviceError, Driver, Reading, Sink, TickHint, check_key
 from drivers.capture.clock import clock_wait_until
 from drivers.capture.format import RegisterRead
 from drivers.modbus_adc.channels import Channel, ChannelMap
-from drivers.modbus_adc.tcpreads import TcpRegisterReads
 
 log = logging.getLogger(__name__)
 
@@ -289,8 +288,6 @@ class ModbusAdcDriver(Driver):
         config); in-memory replays and tests pass their own."""
         self._blocks = config.channels.blocks(config.max_gap)
         self._client: Any = None
-        self._reads: TcpRegisterReads | None = None
-        """The TCP client's reads without its transaction layer (set by ``open``)."""
         self._next_poll: float | None = None
         self._failed_polls = 0
         self.health.extra["channels"] = chh = {c.name: _new_channel_health()
@@ -356,13 +353,6 @@ class ModbusAdcDriver(Driver):
             client.close()
             raise DeviceError(f"cannot connect to Modbus module at {self.config.endpoint}")
         self._client = client
-        c = self.config
-        # pymodbus' own TCP client: its reads through its framer and socket only
-        # (drivers/modbus_adc/tcpreads.py); other clients (RTU, replays, tests' own)
-        # through their read methods
-        self._reads = (TcpRegisterReads(client, c.unit, c.function_code, c.timeout_s,
-                                        c.retries)
-                       if c.transport == "tcp" and self.client_factory is None else None)
         self._failed_polls = 0
         self._next_poll = None
         self._target = None
@@ -384,13 +374,10 @@ class ModbusAdcDriver(Driver):
         client = self._client
         if not client.connected and not client.connect():
             return None, "timeout", None
+        fn = client.read_input_registers if c.function == "input" else \
+            client.read_holding_registers
         try:
-            if self._reads is not None:
-                rr = self._reads(address, count)
-            elif c.function == "input":
-                rr = client.read_input_registers(address, count=count, device_id=c.unit)
-            else:
-                rr = client.read_holding_registers(address, count=count, device_id=c.unit)
+            rr = fn(address, count=count, device_id=c.unit)
         except (TimeoutError, OSError):
             return None, "timeout", None
         except Exception as e:  # noqa: BLE001 - narrowed below, pymodbus imported only now
