@@ -289,8 +289,8 @@ class Calibrator:
     method: str = "output"
     exclusion: ExclusionConfig = field(default_factory=ExclusionConfig)
     window_s: float = DEFAULT_WINDOW_S
-    """Zero-phase smoothing of the joint angles (recorded in the params; the engine uses
-    the same)."""
+    """Zero-phase smoothing of the joint angles for identification (recorded in the
+    params; the engine's payload equations use ``payload_window_s``)."""
     polyorder: int = DEFAULT_POLYORDER
     payload_window_s: float = PAYLOAD_WINDOW_S
     """The payload equations' own smoothing, recorded for the engine: lift and swing are

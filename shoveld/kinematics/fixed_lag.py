@@ -4,14 +4,15 @@ The causal Kalman filter's acceleration lags by ~0.15 s, and because a lift
 starts and ends with the acceleration changing, that lag does not average out
 over a pass: it biased payloads by -0.5 % to +0.4 % of the load depending on the
 window (bench/kinematics_tradeoff.py). Evaluating the equations of motion half a
-window late, with the same Savitzky-Golay fit as identification and the currents
-of that same instant, removes the bias at the price of a delay of half a window (0.41 s),
-which the operator never sees (the pass is final at the dump, seconds later).
+window late, with a zero-phase Savitzky-Golay fit (the payload's own, recorded in the
+params: 1.5 s by default) and the currents of that same instant, removes the bias at
+the price of a delay of half a window (0.75 s), which the operator never sees (the
+pass is final at the dump, seconds later).
 
 A short hole in the stream (ticks the loop skipped on a busy host, a sample with an
 unknown angle) does not restart the window: the windows over it are fitted to the
 samples they have, so a lift keeps its payload equations instead of losing a whole
-window (0.82 s) for one late tick. A hole longer than ``max_gap_s`` restarts.
+window (1.5 s) for one late tick. A hole longer than ``max_gap_s`` restarts.
 """
 
 from __future__ import annotations
