@@ -36,6 +36,20 @@ def _both_ways(read: Callable[..., Iterator[Any]], path: Path) -> tuple[Any, Any
     return _outcome(read, path, True), _outcome(read, path, False)
 
 
+def _serial_file(tmp_path: Path, body: str) -> Path:
+    """A serial recording of ``body``'s lines under the recorder's header."""
+    p = tmp_path / "x.serial.jsonl"
+    p.write_bytes((SERIAL_HEAD + body).encode())
+    return p
+
+
+def _modbus_file(tmp_path: Path, body: str) -> Path:
+    """A Modbus recording of ``body``'s lines under the recorder's header."""
+    p = tmp_path / "x.modbus.jsonl"
+    p.write_bytes((MODBUS_HEAD + body).encode())
+    return p
+
+
 @pytest.mark.parametrize("path", sorted(CAPTURES.glob("*/*.jsonl")), ids=lambda p: p.name)
 def test_committed_recordings_read_alike(path: Path) -> None:
     read = fmt.read_serial_chunks if path.name.endswith(".serial.jsonl") else \
@@ -78,16 +92,14 @@ MODBUS_CASES = {
 
 @pytest.mark.parametrize("name", sorted(SERIAL_CASES))
 def test_serial_files_read_alike(name: str, tmp_path: Path) -> None:
-    p = tmp_path / "x.serial.jsonl"
-    p.write_bytes((SERIAL_HEAD + SERIAL_CASES[name]).encode())
+    p = _serial_file(tmp_path, SERIAL_CASES[name])
     whole, by_line = _both_ways(fmt.read_serial_chunks, p)
     assert whole == by_line
 
 
 @pytest.mark.parametrize("name", sorted(MODBUS_CASES))
 def test_modbus_files_read_alike(name: str, tmp_path: Path) -> None:
-    p = tmp_path / "x.modbus.jsonl"
-    p.write_bytes((MODBUS_HEAD + MODBUS_CASES[name]).encode())
+    p = _modbus_file(tmp_path, MODBUS_CASES[name])
     whole, by_line = _both_ways(fmt.read_modbus_reads, p)
     assert whole == by_line
 
@@ -117,8 +129,7 @@ def test_committed_serial_recordings_read_alike_as_columns(path: Path) -> None:
 
 @pytest.mark.parametrize("name", sorted(SERIAL_CASES))
 def test_serial_files_read_alike_as_columns(name: str, tmp_path: Path) -> None:
-    p = tmp_path / "x.serial.jsonl"
-    p.write_bytes((SERIAL_HEAD + SERIAL_CASES[name]).encode())
+    p = _serial_file(tmp_path, SERIAL_CASES[name])
     assert _columns_outcome(p) == _columns_of(p)
 
 
@@ -144,7 +155,6 @@ ANSWERED_CASES = {
 @pytest.mark.parametrize("name", sorted(ANSWERED_CASES))
 def test_modbus_files_of_answers_only_read_alike(name: str, tmp_path: Path) -> None:
     """Files where every record holds words take the column-by-column path."""
-    p = tmp_path / "x.modbus.jsonl"
-    p.write_bytes((MODBUS_HEAD + ANSWERED_CASES[name]).encode())
+    p = _modbus_file(tmp_path, ANSWERED_CASES[name])
     whole, by_line = _both_ways(fmt.read_modbus_reads, p)
     assert whole == by_line
