@@ -316,6 +316,12 @@ def read_serial_columns(path: str | os.PathLike[str]) -> SerialColumns:
     return [c.t for c in chunks], [c.direction for c in chunks], [c.data for c in chunks]
 
 
+def _head_ok(unit: int, fc: int, addr: int, count: int) -> bool:
+    """A record's block as the whole-file path accepts it (anything else is left to the
+    line-by-line reader, which names what is wrong)."""
+    return unit <= 255 and 3 <= fc <= 4 and addr <= 65535 and 1 <= count <= 125
+
+
 def _fast_modbus_reads(path: Path) -> list[RegisterRead] | None:
     recs = _bulk_records(path, MODBUS_FORMAT, _MODBUS_LINE)
     if recs is None:
@@ -328,8 +334,7 @@ def _fast_modbus_reads(path: Path) -> list[RegisterRead] | None:
     for ts, us, fs, As, cs, regs_s, code_s in recs:
         t = float(ts)
         unit, fc, addr, count = int(us), int(fs), int(As), int(cs)
-        if not (t >= prev and isfinite(t) and unit <= 255 and 3 <= fc <= 4
-                and addr <= 65535 and 1 <= count <= 125):
+        if not (t >= prev and isfinite(t) and _head_ok(unit, fc, addr, count)):
             return None
         prev = t
         if regs_s:
@@ -361,7 +366,7 @@ def _answered_reads(recs: list[tuple[str, ...]]) -> list[RegisterRead] | None:
     heads: dict[tuple[str, ...], tuple[int, int, int, int]] = {}
     for key in set(zip(us, fs, As, cs, strict=True)):
         unit, fc, addr, count = map(int, key)
-        if not (unit <= 255 and 3 <= fc <= 4 and addr <= 65535 and 1 <= count <= 125):
+        if not _head_ok(unit, fc, addr, count):
             return None
         heads[key] = (unit, fc, addr, count)
     blocks = map(heads.__getitem__, zip(us, fs, As, cs, strict=True))
