@@ -125,10 +125,12 @@ def main() -> None:
     pa.add_identification_args(ap)
     args = ap.parse_args()
     options = pa.identification_options(args)
-    if options:
-        print(f"identification: {options}")
+    engine = pa.engine_options(args)
+    if options or engine:
+        print(f"options: {options | engine}")
     t0 = time.perf_counter()
-    with ProcessPoolExecutor(args.jobs, initializer=pa._init, initargs=(options,)) as ex:
+    with ProcessPoolExecutor(args.jobs, initializer=pa._init,
+                             initargs=(options, engine)) as ex:
         res = list(ex.map(payload_job, [{"seed": s, "passes": args.passes}
                                         for s in range(1, args.machines + 1)]))
         abl = list(ex.map(ablation_job, [(n, s) for n in ABLATIONS

@@ -49,8 +49,13 @@ SMOOTHING: dict[str, Any] = {}
 """Calibrator keywords from the command line (set in each worker by ``_init``)."""
 
 
-def _init(smoothing: dict[str, Any]) -> None:
+ENGINE: dict[str, Any] = {}
+"""EngineConfig keywords from the command line (the same way)."""
+
+
+def _init(smoothing: dict[str, Any], engine: dict[str, Any] | None = None) -> None:
     SMOOTHING.update(smoothing)
+    ENGINE.update(engine or {})
 
 
 def add_identification_args(ap: argparse.ArgumentParser) -> None:
@@ -64,6 +69,15 @@ def add_identification_args(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--angle-noise", action=argparse.BooleanOptionalAction,
                     help="the angles' errors-in-variables correction (default: calibrate's, "
                          "on; --no-angle-noise: off)")
+    ap.add_argument("--settle-test-z", type=float, metavar="Z",
+                    help="the engine's test of the settle time's samples, in standard "
+                         "errors (default: the engine's; 0: never keep them, as before "
+                         "2026-11-27)")
+
+
+def engine_options(args: argparse.Namespace) -> dict[str, Any]:
+    """EngineConfig keywords of the options given (for ``_init`` in each worker)."""
+    return {} if args.settle_test_z is None else {"settle_test_z": args.settle_test_z}
 
 
 def identification_options(args: argparse.Namespace) -> dict[str, Any]:
@@ -106,9 +120,10 @@ def calibrate_with_verified(machine: Any, seed: int, n: int) -> Any:
 
 
 def passes(params: Any, res: Any) -> list[dict[str, float]]:
+    from shoveld.engine.loop import EngineConfig
     from shoveld.engine.offline import estimate_table
 
-    est = estimate_table(res.table, params)
+    est = estimate_table(res.table, params, EngineConfig(**ENGINE))
     t = res.table.time
     field = res.table.columns["hoist_field_a"]
     out = []
@@ -194,10 +209,11 @@ def main() -> None:
     add_identification_args(ap)
     args = ap.parse_args()
     smoothing = identification_options(args)
-    if smoothing:
-        print(f"smoothing: {smoothing}")
+    engine = engine_options(args)
+    if smoothing or engine:
+        print(f"options: {smoothing | engine}")
     t0 = time.perf_counter()
-    with ProcessPoolExecutor(args.jobs, initializer=_init, initargs=(smoothing,)) as ex:
+    with ProcessPoolExecutor(args.jobs, initializer=_init, initargs=(smoothing, engine)) as ex:
         res = list(ex.map(one_machine, [{"seed": s, "passes": args.passes,
                                          "verified": args.verified}
                                         for s in range(1, args.machines + 1)]))

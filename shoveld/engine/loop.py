@@ -77,7 +77,14 @@ class EngineConfig:
     """Samples per payload-filter update (one model evaluation and one filter update
     per block; the live payload moves in steps of this many ticks)."""
     settle_s: float = 0.4
-    """Samples this soon after leaving the bank are not used (bank contact fades)."""
+    """Samples this soon after leaving the bank may still feel it (bank contact fades):
+    they count only if they agree with the rest of the pass (``settle_test_z``)."""
+    settle_test_z: float = 2.0
+    """The settle time's samples are kept in a pass when its payload with them and
+    without them differ by at most this many standard errors of that difference (a
+    Hausman test: with no bank contact the estimate with them is the better one, so
+    the difference's variance is the difference of the two variances); 0: never kept,
+    as before 2026-11-27 (docs/engine.md, "The settle time, tested")."""
     min_samples: int = 40
     """A pass with fewer valid payload updates is reported invalid."""
     hoist_field_nominal_a: float = 70.0
@@ -165,7 +172,7 @@ class Engine:
         self._cached: tuple[int, float, float] = (-1, math.nan, math.nan)
         self.uses_field = any(getattr(t, "uses_field_current", False) for t in self.model.terms)
         self.window_s, self.polyorder = smoothing(params, self.cfg)
-        self.lagged: FixedLagSavgol[tuple[Sample, bool, int] | None] = FixedLagSavgol(
+        self.lagged: FixedLagSavgol[tuple[Sample, int, int] | None] = FixedLagSavgol(
             self.window_s, dt, 3, self.polyorder)
         self.phases = PhaseMachine(self.cfg.phases)
         self.noise = (params.noise["handle"], params.noise["crowd"])
@@ -173,6 +180,13 @@ class Engine:
         """The calibration's current-noise model; empty for a params file of the old
         equation-error form, which the filter then runs in its own units."""
         self.rls: PayloadRls | None = None
+        """The pass's filter over its settled samples (the live estimate's)."""
+        self._rows: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]] = []
+        """Every payload row of the pass, the settle time's too, as blocks (a, b, db/dp,
+        sigma): the filter with the settle time is built from them at the dump, in one
+        update (``settle_test_z``), not block by block beside the live one."""
+        self._early_rows = 0
+        """Rows of the pass's settle time among them."""
         self.pass_index = first_pass - 1
         self._cycle = 0
         """Dig cycles started: tags the lagged samples so none crosses into another cycle
@@ -191,6 +205,7 @@ class Engine:
         # The settings read at every tick, as plain attributes (one lookup, not two).
         self._warmup_s = self.cfg.warmup_s
         self._settle_s = self.cfg.settle_s
+        self._early_use = 1 if self.cfg.settle_test_z > 0 else 0
         self._kalman_rates = self.cfg.payload_rates == "kalman"
 
     # -- public -----------------------------------------------------------------------
@@ -222,17 +237,19 @@ class Engine:
         events: list[Event] = self._transition(prev, ph, t) if ph != prev else []
         valid = False
         estimating = ph == LIFT or ph == SWING  # ph in ESTIMATING
-        settled = estimating and t - self.dig_end >= self._settle_s
+        # which samples the payload may use: 2 settled, 1 in the settle time, 0 none
+        use = (0 if not estimating else 2 if t - self.dig_end >= self._settle_s
+               else self._early_use)
         lag = self.lagged
         if self._kalman_rates:
-            if settled and self.rls is not None:
-                valid = self._update(s, th, d, sw, thd, dd, swd, thdd, ddd, swdd)
+            if use and self.rls is not None:
+                valid = self._update(s, th, d, sw, thd, dd, swd, thdd, ddd, swdd, use)
         else:
             if t - lag.last_t > lag.late:  # ticks the loop skipped: holes in the window
                 for _ in range(lag.gap(t)):
                     valid = self._lagged(lag.push_hole(), ph) or valid
             tag = lag.push_known(t, (z_th, z_d, 0.0 if z_sw != z_sw else z_sw),
-                                 (s, settled, self._cycle), z_th != z_th or z_d != z_d)
+                                 (s, use, self._cycle), z_th != z_th or z_d != z_d)
             # _lagged's two common answers inline: no centre sample yet, or one that
             # is not used (not settled, or not this cycle's)
             if tag is None:
@@ -280,6 +297,8 @@ class Engine:
             # the payload's scores are correlated over the angles' smoothing window
             lag = round(self.window_s / self.dt) if self.current_noise else 0
             self.rls = PayloadRls(self.noise, self.dt, self.cfg.rls, hac_lag=lag)
+            self._rows = []
+            self._early_rows = 0
             self._cached = (-1, math.nan, math.nan)
             self.batch.clear()
             self.invalid_updates = 0
@@ -292,40 +311,60 @@ class Engine:
             # the cycle was abandoned before a dump: no pass, and its number goes to the
             # next cycle, so the operator's pass numbers have no gaps
             self.rls = None
+            self._rows = []
             self.pass_index -= 1
         return out
 
-    def _finish_pass(self, t: float) -> list[Event]:
+    def _final_filter(self) -> PayloadRls:
+        """The pass's filter to report: with the settle time's samples when they agree
+        with the settled ones (``settle_test_z``), else without them. Samples that make
+        the pass's own std larger, not smaller, are refused too: the test's premise (the
+        estimate with them is the better one) does not hold."""
         rls = self.rls
         assert rls is not None
+        if not self._early_rows or not rls.n:
+            return rls
+        early = PayloadRls(self.noise, self.dt, self.cfg.rls, hac_lag=rls.hac_lag)
+        a, b, db_dp, sig = zip(*self._rows, strict=True)
+        early.update(np.concatenate(a), np.concatenate(b), np.concatenate(db_dp),
+                     sigma=None if sig[0] is None else np.concatenate(sig))
+        d = rls.payload_kg - early.payload_kg
+        v = rls.std_kg ** 2 - early.std_kg ** 2
+        z = self.cfg.settle_test_z
+        return early if d * d <= z * z * v else rls
+
+    def _finish_pass(self, t: float) -> list[Event]:
+        rls = self._final_filter()
         valid = rls.n >= self.cfg.min_samples
         reason = "" if valid else (
             f"only {n_of(rls.n, 'valid sample', 'valid samples')} in lift and swing "
             f"({self.invalid_updates} invalid)")
         pr = PassResult(self.pass_index, self.truck.index, self.pass_start, t, rls.payload_kg,
-                        self._std(), rls.n, valid, reason)
+                        self._std(rls), rls.n, valid, reason)
         self.truck.passes.append(pr.as_dict())
         self.last_dump_t = t
         self.rls = None
+        self._rows = []
         return [pr, TruckResult(self.truck, closed=False)]
 
-    def _lagged(self, tag: tuple[Sample, bool, int] | None, ph: int) -> bool:
+    def _lagged(self, tag: tuple[Sample, int, int] | None, ph: int) -> bool:
         """The payload update of the sample the fixed-lag fit has just centred on."""
         if tag is None:
             if ph in ESTIMATING:
                 self.invalid_updates += 1
             return False
-        s_lag, settled_lag, cycle_lag = tag
-        if settled_lag and cycle_lag == self._cycle and self.rls is not None:
+        s_lag, use, cycle_lag = tag
+        if use and cycle_lag == self._cycle and self.rls is not None:
             # the fit only where it is used; as Python floats, which the checks and the
             # batch's array take faster than numpy scalars (the same values)
             q, v, a = self.lagged.derivatives().tolist()
-            return self._update(s_lag, *q, *v, *a)
+            return self._update(s_lag, *q, *v, *a, use)
         return False
 
     def _update(self, s: Sample, th: float, d: float, sw: float, thd: float, dd: float,
-                swd: float, thdd: float, ddd: float, swdd: float) -> bool:
-        """Queue one sample for the payload filter if its inputs are valid."""
+                swd: float, thdd: float, ddd: float, swdd: float, use: int = 2) -> bool:
+        """Queue one sample for the payload filter if its inputs are valid (``use`` 1:
+        a settle-time sample, for the pass's second filter only)."""
         i_h = s.hoist1_a + s.hoist2_a
         if (not s.invalid.isdisjoint(NEEDED) or math.isnan(i_h) or math.isnan(s.crowd_a)
                 or math.isnan(th) or math.isnan(d)):
@@ -338,7 +377,7 @@ class Engine:
         roll = 0.0 if math.isnan(s.roll_deg) else s.roll_deg
         pitch = 0.0 if math.isnan(s.pitch_deg) else s.pitch_deg
         self.batch.append((s.time_s, th, thd, thdd, d, dd, ddd, boom, i_h, s.crowd_a,
-                           s.hoist_field_a, sw, swd, swdd, roll, pitch))
+                           s.hoist_field_a, sw, swd, swdd, roll, pitch, use))
         if len(self.batch) >= self.cfg.batch:
             self._flush()
         return True
@@ -364,21 +403,40 @@ class Engine:
             jac = ce.jacobian(self.p, m)
             # the rows' test only when a value is not finite (two ufuncs an array, without
             # the ``all`` methods' Python wrappers: nearly every block is all finite)
+            use = c[16]
             if not (_all(_isfinite(a), None) and _all(_isfinite(b), None)):
                 ok = np.isfinite(a).all(axis=1) & np.isfinite(b).all(axis=1)
                 if not ok.all():
-                    a, b, sig, jac = a[ok], b[ok], sig[ok], jac[ok]
-            self.rls.update(a, b, -jac, sigma=sig)
+                    a, b, sig, jac, use = a[ok], b[ok], sig[ok], jac[ok], use[ok]
+            self._apply(use, a, b, -jac, sig)
             return
         w, phi, psi = self.model.regressor(k)
         a = phi + psi @ self.p
         b = -(w @ self.p)
-        self.rls.update(a, b, -(w + m * psi))
+        self._apply(c[16], a, b, -(w + m * psi), None)
 
-    def _std(self) -> float:
-        """Total payload std: the pass's own noise and the calibration's uncertainty."""
+    def _apply(self, use: np.ndarray, a: np.ndarray, b: np.ndarray, db_dp: np.ndarray,
+               sig: np.ndarray | None) -> None:
+        """A block's rows into the pass: the settled ones into the live filter, every one
+        kept for the filter with the settle time (built at the dump)."""
         assert self.rls is not None
-        return math.hypot(self.rls.std_kg, self.rls.param_std_kg(self.params.cov))
+        if self._early_use:
+            self._rows.append((a, b, db_dp, sig))
+        keep = use == 2
+        if not keep.all():
+            self._early_rows += len(keep) - int(np.count_nonzero(keep))
+            if not keep.any():
+                return
+            a, b, db_dp = a[keep], b[keep], db_dp[keep]
+            sig = None if sig is None else sig[keep]
+        self.rls.update(a, b, db_dp, sigma=sig)
+
+    def _std(self, rls: PayloadRls | None = None) -> float:
+        """Total payload std of a pass's filter (default: the live one): the pass's own
+        noise and the calibration's uncertainty."""
+        rls = self.rls if rls is None else rls
+        assert rls is not None
+        return math.hypot(rls.std_kg, rls.param_std_kg(self.params.cov))
 
 
 def run_engine(samples: Iterable[Sample], engine: Engine) -> Iterator[Event]:

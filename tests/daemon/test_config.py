@@ -95,10 +95,12 @@ def test_bad_config_names_the_key(example: Path, old: str, new: str, key: str,
 
 
 def test_engine_sections_and_params_errors(example: Path) -> None:
-    edit(example, "[zenoh]", "[engine]\nmin_samples = 30\n[engine.phases]\ntuck_deg = -20.0\n"
+    edit(example, "[zenoh]", "[engine]\nmin_samples = 30\nsettle_test_z = 0\n"
+                             "[engine.phases]\ntuck_deg = -20.0\n"
                              "[engine.rls]\nprior_kg = 10000.0\n\n[zenoh]")
     cfg = load_config(example)
     assert cfg.engine.min_samples == 30 and cfg.engine.phases.tuck_deg == -20.0
+    assert cfg.engine.settle_test_z == 0.0
     assert cfg.engine.rls.prior_kg == 10000.0
     edit(example, "tuck_deg = -20.0", "tuck = -20.0")
     with pytest.raises(ConfigError, match=r"engine\.phases\.tuck"):
