@@ -6,7 +6,7 @@ import argparse
 import json
 import math
 import sys
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from shoveld.cli import CliError
 from shoveld.cli.common import parse_effects, read_tables
@@ -113,6 +113,14 @@ def format_report(params: object) -> str:
     return "\n".join(lines)
 
 
+def _settings(args: argparse.Namespace) -> dict[str, Any]:
+    """``Calibrator``'s settings from the command line (one place for both paths)."""
+    return {"method": args.method, "window_s": args.window, "polyorder": args.polyorder,
+            "payload_window_s": args.payload_window,
+            "payload_polyorder": args.payload_polyorder,
+            "angle_drift_deg": args.angle_drift, "position_noise": args.angle_noise}
+
+
 def _with_verified(model: Model, tables: list[SignalsTable], args: argparse.Namespace
                    ) -> Calibrator:
     """The trials plus the verified passes of ``--verified`` (the pass segmentation and
@@ -121,10 +129,7 @@ def _with_verified(model: Model, tables: list[SignalsTable], args: argparse.Name
 
     try:
         cal, used, found = calibrate_with_verified(
-            model, tables, read_tables(args.verified), args.method, args.window,
-            args.polyorder, args.angle_drift, position_noise=args.angle_noise,
-            payload_window_s=args.payload_window,
-            payload_polyorder=args.payload_polyorder)
+            model, tables, read_tables(args.verified), **_settings(args))
     except ValueError as e:
         raise CliError(f"--verified {' '.join(args.verified)}: {e}") from None
     print(f"identified with {n_of(used, 'verified pass', 'verified passes')} of {found} in "
@@ -143,12 +148,7 @@ def run(args: argparse.Namespace) -> int:
         if args.verified:
             cal = _with_verified(model, tables, args)
         else:
-            cal = Calibrator(model=model, method=args.method, window_s=args.window,
-                             polyorder=args.polyorder,
-                             payload_window_s=args.payload_window,
-                             payload_polyorder=args.payload_polyorder,
-                             angle_drift_deg=args.angle_drift,
-                             position_noise=args.angle_noise).fit(tables)
+            cal = Calibrator(model=model, **_settings(args)).fit(tables)
     except ValueError as e:
         raise CliError(str(e)) from None
     assert cal.params_ is not None

@@ -17,13 +17,10 @@ from typing import Any
 import numpy as np
 
 from shoveld.diagnose.data import DataSet, Pass
-from shoveld.identify import ANGLE_DRIFT_DEG
 from shoveld.identify.calibrate import Calibrator, FileData
 from shoveld.kinematics import (
     DEFAULT_POLYORDER,
     DEFAULT_WINDOW_S,
-    PAYLOAD_POLYORDER,
-    PAYLOAD_WINDOW_S,
 )
 from shoveld.model.kin import Kinematics
 from shoveld.model.model import Model
@@ -42,14 +39,13 @@ class DiagCalibrator(Calibrator):
     smoothing, the boom spring of ``tests/diagnose/test_detect.py`` went unnamed)."""
 
     def __init__(self, model: Model, dataset: DataSet, train: set[int] | None,
-                 method: str = "output", angle_drift_deg: float = ANGLE_DRIFT_DEG,
-                 position_noise: bool = True, payload_window_s: float = PAYLOAD_WINDOW_S,
-                 payload_polyorder: int = PAYLOAD_POLYORDER) -> None:
-        super().__init__(model=model, method=method, exclusion=dataset.exclusion,
-                         window_s=dataset.window_s, polyorder=dataset.polyorder,
-                         payload_window_s=payload_window_s,
-                         payload_polyorder=payload_polyorder,
-                         angle_drift_deg=angle_drift_deg, position_noise=position_noise)
+                 **options: Any) -> None:
+        """``options``: any other of ``Calibrator``'s settings (method, drift, the
+        angles' noise, the payload's smoothing), passed through as they are, so a new
+        setting needs no change here; the exclusion and the identification's smoothing
+        are the dataset's, which cut the passes with them."""
+        super().__init__(model=model, exclusion=dataset.exclusion,
+                         window_s=dataset.window_s, polyorder=dataset.polyorder, **options)
         self.dataset = dataset
         self.train = train
 
@@ -58,25 +54,21 @@ class DiagCalibrator(Calibrator):
 
 
 def calibrate_with_verified(model: Model, trials: list[SignalsTable],
-                            verified: list[SignalsTable], method: str = "output",
+                            verified: list[SignalsTable],
                             window_s: float = DEFAULT_WINDOW_S,
-                            polyorder: int = DEFAULT_POLYORDER,
-                            angle_drift_deg: float = ANGLE_DRIFT_DEG,
-                            position_noise: bool = True,
-                            payload_window_s: float = PAYLOAD_WINDOW_S,
-                            payload_polyorder: int = PAYLOAD_POLYORDER
+                            polyorder: int = DEFAULT_POLYORDER, **options: Any
                             ) -> tuple[Calibrator, int, int]:
     """Identify ``model`` on the trials plus every scale-verified pass of the ``verified``
     tables (``shoveld calibrate --verified``): the passes bring a full dipper's currents,
-    which the trials lack. Returns the fitted calibrator, the verified passes used and
-    the passes found; none verified raises ValueError."""
+    which the trials lack. ``options``: ``Calibrator``'s other settings. Returns the
+    fitted calibrator, the verified passes used and the passes found; none verified
+    raises ValueError."""
     ds = DataSet(trials, verified, window_s=window_s, polyorder=polyorder)
     train = {p.index for p in ds.passes if p.verified}
     if not train:
         raise ValueError("no pass with a verified payload (the payload_kg column must hold "
                          "the weighed payload through each verified pass)")
-    cal = DiagCalibrator(model, ds, train, method, angle_drift_deg,
-                         position_noise, payload_window_s, payload_polyorder).fit(ds.calib)
+    cal = DiagCalibrator(model, ds, train, **options).fit(ds.calib)
     return cal, len(train), len(ds.passes)
 
 
@@ -93,7 +85,7 @@ def fit(dataset: DataSet, effects: list[str], hyper: dict[str, dict[str, Any]],
         train: set[int] | None, method: str = "output") -> ModelParams:
     """Identify base + ``effects`` on the trials (plus the passes in ``train``)."""
     model = Model.from_names(effects, {k: dict(v) for k, v in hyper.items()})
-    cal = DiagCalibrator(model, dataset, train, method).fit(dataset.calib)
+    cal = DiagCalibrator(model, dataset, train, method=method).fit(dataset.calib)
     assert cal.params_ is not None
     return cal.params_
 
