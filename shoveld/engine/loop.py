@@ -51,6 +51,10 @@ _RAD = math.pi / 180.0
 _DEG = 180.0 / math.pi
 """math.degrees's factor (``radToDeg``): ``x * _DEG`` is ``math.degrees(x)``."""
 
+FOLD_BLOCKS = 64
+"""Payload blocks kept for the filter with the settle time before they are folded into
+it: about 6 s of lift and swing at 100 Hz, so a long pass holds a bounded memory."""
+
 NEEDED = ("handle_deg", "crowd_m", "hoist1_a", "hoist2_a", "hoist_field_a", "crowd_a")
 """Signals without which a payload update is not made."""
 
@@ -181,12 +185,14 @@ class Engine:
         equation-error form, which the filter then runs in its own units."""
         self.rls: PayloadRls | None = None
         """The pass's filter over its settled samples (the live estimate's)."""
+        self.rls_all: PayloadRls | None = None
+        """The same pass with its settle time's samples too (``settle_test_z``), brought
+        up to date only now and then (:meth:`_fold`): the live estimate does not need it."""
         self._rows: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]] = []
-        """Every payload row of the pass, the settle time's too, as blocks (a, b, db/dp,
-        sigma): the filter with the settle time is built from them at the dump, in one
-        update (``settle_test_z``), not block by block beside the live one."""
+        """The payload rows (a, b, db/dp, sigma blocks) not yet in ``rls_all``."""
         self._early_rows = 0
-        """Rows of the pass's settle time among them."""
+        """Rows of the pass's settle time (they come first: a pass without any keeps no
+        rows for ``rls_all``)."""
         self.pass_index = first_pass - 1
         self._cycle = 0
         """Dig cycles started: tags the lagged samples so none crosses into another cycle
@@ -297,6 +303,7 @@ class Engine:
             # the payload's scores are correlated over the angles' smoothing window
             lag = round(self.window_s / self.dt) if self.current_noise else 0
             self.rls = PayloadRls(self.noise, self.dt, self.cfg.rls, hac_lag=lag)
+            self.rls_all = None
             self._rows = []
             self._early_rows = 0
             self._cached = (-1, math.nan, math.nan)
@@ -310,7 +317,7 @@ class Engine:
         if ph == IDLE and prev != IDLE and self.rls is not None and prev in ESTIMATING:
             # the cycle was abandoned before a dump: no pass, and its number goes to the
             # next cycle, so the operator's pass numbers have no gaps
-            self.rls = None
+            self.rls = self.rls_all = None
             self._rows = []
             self.pass_index -= 1
         return out
@@ -324,10 +331,9 @@ class Engine:
         assert rls is not None
         if not self._early_rows or not rls.n:
             return rls
-        early = PayloadRls(self.noise, self.dt, self.cfg.rls, hac_lag=rls.hac_lag)
-        a, b, db_dp, sig = zip(*self._rows, strict=True)
-        early.update(np.concatenate(a), np.concatenate(b), np.concatenate(db_dp),
-                     sigma=None if sig[0] is None else np.concatenate(sig))
+        self._fold()
+        early = self.rls_all
+        assert early is not None
         d = rls.payload_kg - early.payload_kg
         v = rls.std_kg ** 2 - early.std_kg ** 2
         z = self.cfg.settle_test_z
@@ -343,7 +349,7 @@ class Engine:
                         self._std(rls), rls.n, valid, reason)
         self.truck.passes.append(pr.as_dict())
         self.last_dump_t = t
-        self.rls = None
+        self.rls = self.rls_all = None
         self._rows = []
         return [pr, TruckResult(self.truck, closed=False)]
 
@@ -418,18 +424,36 @@ class Engine:
     def _apply(self, use: np.ndarray, a: np.ndarray, b: np.ndarray, db_dp: np.ndarray,
                sig: np.ndarray | None) -> None:
         """A block's rows into the pass: the settled ones into the live filter, every one
-        kept for the filter with the settle time (built at the dump)."""
+        (once the pass has a settle time) kept for the filter with the settle time."""
         assert self.rls is not None
-        if self._early_use:
-            self._rows.append((a, b, db_dp, sig))
         keep = use == 2
-        if not keep.all():
+        settled = bool(keep.all())
+        if not settled:
             self._early_rows += len(keep) - int(np.count_nonzero(keep))
+        if self._early_rows:
+            self._rows.append((a, b, db_dp, sig))
+            if len(self._rows) >= FOLD_BLOCKS:
+                self._fold()
+        if not settled:
             if not keep.any():
                 return
             a, b, db_dp = a[keep], b[keep], db_dp[keep]
             sig = None if sig is None else sig[keep]
         self.rls.update(a, b, db_dp, sigma=sig)
+
+    def _fold(self) -> None:
+        """The kept rows into ``rls_all`` in one update (the same estimate as block by
+        block without forgetting, the default), so they never pile up."""
+        if not self._rows:
+            return
+        if self.rls_all is None:
+            assert self.rls is not None
+            self.rls_all = PayloadRls(self.noise, self.dt, self.cfg.rls,
+                                      hac_lag=self.rls.hac_lag)
+        a, b, db_dp, sig = zip(*self._rows, strict=True)
+        self.rls_all.update(np.concatenate(a), np.concatenate(b), np.concatenate(db_dp),
+                            sigma=None if sig[0] is None else np.concatenate(sig))
+        self._rows = []
 
     def _std(self, rls: PayloadRls | None = None) -> float:
         """Total payload std of a pass's filter (default: the live one): the pass's own

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from shoveld.engine import loop
 from shoveld.engine.loop import EngineConfig, LiveEstimate
 from shoveld.engine.offline import Estimate, estimate_table
 from shoveld.model.params import ModelParams
@@ -42,9 +43,13 @@ def payloads(est: Estimate) -> np.ndarray:
     return np.array([p.payload_kg for p in est.passes])
 
 
-def test_clean_settle_time_is_kept(params: ModelParams, cycles: SimResult) -> None:
+def test_clean_settle_time_is_kept(params: ModelParams, cycles: SimResult,
+                                   monkeypatch: pytest.MonkeyPatch) -> None:
     """Without bank contact the test keeps the settle time's samples in nearly every pass
     (a 2-sigma test refuses about one pass in twenty), and they move it little."""
+    # the second filter takes its rows in updates of 4 blocks (64 by default, more than
+    # these 50 Hz passes have), so the folding is tested too
+    monkeypatch.setattr(loop, "FOLD_BLOCKS", 4)
     new = estimate_table(cycles.table, params)
     old = estimate_table(cycles.table, params, NEVER)
     n_new = np.array([p.samples for p in new.passes])
@@ -54,6 +59,15 @@ def test_clean_settle_time_is_kept(params: ModelParams, cycles: SimResult) -> No
     assert np.count_nonzero(n_new > n_old) >= 0.8 * len(n_new)
     stds = np.array([p.std_kg for p in old.passes])
     assert np.all(np.abs(payloads(new) - payloads(old)) < 2 * stds)
+    # where kept, the pass is the one with no settle time at all: the same rows, kept
+    # aside and folded into the second filter a few blocks at a time
+    always = estimate_table(cycles.table, params, ALWAYS)
+    kept = n_new > n_old
+    assert [p.samples for p in always.passes] == [
+        p.samples if k else a.samples
+        for p, a, k in zip(new.passes, always.passes, kept, strict=True)]
+    np.testing.assert_allclose(payloads(new)[kept], payloads(always)[kept], rtol=1e-9)
+    assert min(n_new) > 20 * loop.FOLD_BLOCKS
 
 
 def test_bank_pull_in_the_settle_time_is_refused(params: ModelParams,
