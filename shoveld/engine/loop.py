@@ -9,6 +9,7 @@ rates (``shoveld.kinematics.fixed_lag``), which removes the filter-lag bias.
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
@@ -43,6 +44,8 @@ from shoveld.payload.rls import PayloadRls, RlsConfig
 from shoveld.payload.trucks import Truck
 from shoveld.sample import Sample
 from shoveld.words import n_of
+
+log = logging.getLogger(__name__)
 
 _all = np.logical_and.reduce
 _isfinite = np.isfinite
@@ -193,6 +196,10 @@ class Engine:
         self._early_rows = 0
         """Rows of the pass's settle time (they come first: a pass without any keeps no
         rows for ``rls_all``)."""
+        self.settle_kept = 0
+        self.settle_refused = 0
+        """Passes whose settle time the test kept and refused: many refusals say the
+        bank holds the dipper past the phase machine's exit (``dig_exit_deg``)."""
         self.pass_index = first_pass - 1
         self._cycle = 0
         """Dig cycles started: tags the lagged samples so none crosses into another cycle
@@ -337,7 +344,17 @@ class Engine:
         d = rls.payload_kg - early.payload_kg
         v = rls.std_kg ** 2 - early.std_kg ** 2
         z = self.cfg.settle_test_z
-        return early if d * d <= z * z * v else rls
+        if d * d <= z * z * v:
+            self.settle_kept += 1
+            return early
+        self.settle_refused += 1
+        log.info("pass %d: its first %.1f s out of the bank left out (with them the "
+                 "payload moves %+.0f kg, %s): the bank may still hold the dipper there; "
+                 "%d of %d passes left out so far",
+                 self.pass_index, self.cfg.settle_s, -d,
+                 f"{abs(d) / math.sqrt(v):.1f} std" if v > 0 else "and is noisier",
+                 self.settle_refused, self.settle_refused + self.settle_kept)
+        return rls
 
     def _finish_pass(self, t: float) -> list[Event]:
         rls = self._final_filter()

@@ -3,6 +3,8 @@ when the bank still pulls on the dipper (``EngineConfig.settle_test_z``)."""
 
 from __future__ import annotations
 
+import logging
+
 import numpy as np
 import pytest
 
@@ -43,20 +45,29 @@ def payloads(est: Estimate) -> np.ndarray:
     return np.array([p.payload_kg for p in est.passes])
 
 
+def refusals(caplog: pytest.LogCaptureFixture) -> list[str]:
+    return [r.getMessage() for r in caplog.records
+            if r.name == "shoveld.engine.loop" and "out of the bank left out" in r.getMessage()]
+
+
 def test_clean_settle_time_is_kept(params: ModelParams, cycles: SimResult,
-                                   monkeypatch: pytest.MonkeyPatch) -> None:
+                                   monkeypatch: pytest.MonkeyPatch,
+                                   caplog: pytest.LogCaptureFixture) -> None:
     """Without bank contact the test keeps the settle time's samples in nearly every pass
     (a 2-sigma test refuses about one pass in twenty), and they move it little."""
     # the second filter takes its rows in updates of 4 blocks (64 by default, more than
     # these 50 Hz passes have), so the folding is tested too
     monkeypatch.setattr(loop, "FOLD_BLOCKS", 4)
-    new = estimate_table(cycles.table, params)
+    with caplog.at_level(logging.INFO, logger="shoveld.engine.loop"):
+        new = estimate_table(cycles.table, params)
     old = estimate_table(cycles.table, params, NEVER)
     n_new = np.array([p.samples for p in new.passes])
     n_old = np.array([p.samples for p in old.passes])
     assert len(n_new) == len(n_old) == len(cycles.passes)
     assert np.all(n_new >= n_old)
     assert np.count_nonzero(n_new > n_old) >= 0.8 * len(n_new)
+    # each refusal is logged for the field engineer, and only those
+    assert len(refusals(caplog)) == np.count_nonzero(n_new == n_old)
     stds = np.array([p.std_kg for p in old.passes])
     assert np.all(np.abs(payloads(new) - payloads(old)) < 2 * stds)
     # where kept, the pass is the one with no settle time at all: the same rows, kept
@@ -70,15 +81,19 @@ def test_clean_settle_time_is_kept(params: ModelParams, cycles: SimResult,
     assert min(n_new) > 20 * loop.FOLD_BLOCKS
 
 
-def test_bank_pull_in_the_settle_time_is_refused(params: ModelParams,
-                                                 cycles: SimResult) -> None:
+def test_bank_pull_in_the_settle_time_is_refused(params: ModelParams, cycles: SimResult,
+                                                 caplog: pytest.LogCaptureFixture) -> None:
     """A settle time the bank still pulls on is left out: the pass is what it was without
     the settle time; taking it anyway would put the pull into the payload."""
     starts = lift_starts(estimate_table(cycles.table, params, keep_live=True))
     assert len(starts) == len(cycles.passes)
     settle = EngineConfig().settle_s
     pulled = with_bank_pull(cycles.table, starts, settle, extra_a=300.0)
-    tested = estimate_table(pulled, params)
+    with caplog.at_level(logging.INFO, logger="shoveld.engine.loop"):
+        tested = estimate_table(pulled, params)
+    said = refusals(caplog)
+    assert len(said) == len(cycles.passes)
+    assert said[-1].endswith(f"{len(said)} of {len(said)} passes left out so far")
     never = estimate_table(pulled, params, NEVER)
     always = estimate_table(pulled, params, ALWAYS)
     assert [p.samples for p in tested.passes] == [p.samples for p in never.passes]
