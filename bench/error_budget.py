@@ -14,9 +14,10 @@ Two tables, on realistic simulated machines (``shoveld.sim.machine``):
     .venv/bin/python bench/error_budget.py [--machines 6] [--passes 60]
                                            [--ablate 20] [--jobs 2]
                                            [--window S --polyorder N] [--no-angle-noise]
+                                           [--settle-test-z Z]
 
-``--window``/``--polyorder``/``--[no-]angle-noise``: the identification's options, as in
-``bench/payload_accuracy.py``.
+``--window``/``--polyorder``/``--[no-]angle-noise``: the identification's options, and
+``--settle-test-z`` the engine's settle test, as in ``bench/payload_accuracy.py``.
 """
 
 from __future__ import annotations

@@ -19,7 +19,7 @@ beside the ideal simulator:
                                                [--coverage 120] [--jobs 2]
                                                [--window S --polyorder N]
                                                [--payload-window S --payload-polyorder N]
-                                               [--no-angle-noise]
+                                               [--no-angle-noise] [--settle-test-z Z]
 
 ``--window``/``--polyorder`` set the angles' Savitzky-Golay smoothing of identification,
 ``--payload-window``/``--payload-polyorder`` the payload equations' (recorded in the
@@ -59,7 +59,8 @@ def _init(smoothing: dict[str, Any], engine: dict[str, Any] | None = None) -> No
 
 
 def add_identification_args(ap: argparse.ArgumentParser) -> None:
-    """The identification's options (``calibrate``'s), for this bench and its siblings."""
+    """The identification's options (``calibrate``'s) and the engine's settle test, for
+    this bench and its siblings."""
     ap.add_argument("--window", type=float, help="smoothing window, s (default: calibrate's)")
     ap.add_argument("--polyorder", type=int, help="smoothing order (default: calibrate's)")
     ap.add_argument("--payload-window", type=float,
