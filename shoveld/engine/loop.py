@@ -443,9 +443,11 @@ class Engine:
         """A block's rows into the pass: the settled ones into the live filter, every one
         (once the pass has a settle time) kept for the filter with the settle time."""
         assert self.rls is not None
-        keep = use == 2
-        settled = bool(keep.all())
+        # A pass's rows come in time order, its settle time's first, so a block whose first
+        # row is settled is settled throughout (one look, not an array test per block).
+        settled = not len(use) or use[0] == 2
         if not settled:
+            keep = use == 2
             self._early_rows += len(keep) - int(np.count_nonzero(keep))
         if self._early_rows:
             self._rows.append((a, b, db_dp, sig))
