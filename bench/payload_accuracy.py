@@ -120,13 +120,18 @@ def calibrate_with_verified(machine: Any, seed: int, n: int) -> Any:
     return cal.params_
 
 
-def passes(params: Any, res: Any) -> list[dict[str, float]]:
+def passes(params: Any, res: Any, table: Any = None, cfg: Any = None
+           ) -> list[dict[str, float]]:
+    """Each simulated pass of ``res`` against the engine's: truth, bound, error, std.
+    ``table``: a changed copy of ``res.table`` to estimate instead; ``cfg``: an
+    EngineConfig (default: the command line's)."""
     from shoveld.engine.loop import EngineConfig
     from shoveld.engine.offline import estimate_table
 
-    est = estimate_table(res.table, params, EngineConfig(**ENGINE))
-    t = res.table.time
-    field = res.table.columns["hoist_field_a"]
+    table = res.table if table is None else table
+    est = estimate_table(table, params, cfg or EngineConfig(**ENGINE))
+    t = table.time
+    field = table.columns["hoist_field_a"]
     out = []
     for tp in res.passes:
         near = [p for p in est.passes if abs(p.start_s - tp.phases["dig"][0]) < 2.0]

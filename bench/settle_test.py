@@ -38,7 +38,6 @@ def configs() -> dict[str, Any]:
 
 
 def one_machine(job: tuple[int, int]) -> dict[tuple[float, float, str], list[tuple[float, float]]]:
-    from shoveld.engine.offline import estimate_table
     from shoveld.signals.table import SignalsTable
     from shoveld.sim.machine import Machine
     from shoveld.sim.scenario import simulate_cycles
@@ -59,12 +58,8 @@ def one_machine(job: tuple[int, int]) -> dict[tuple[float, float, str], list[tup
             cols["hoist2_a"][after] += extra / 2
         table = SignalsTable.from_arrays(meta=dict(res.table.meta), **cols)
         for name, cfg in configs().items():
-            est = estimate_table(table, params, cfg)
-            rows = out.setdefault((amp, tau, name), [])
-            for tp in res.passes:
-                near = [q for q in est.passes if abs(q.start_s - tp.phases["dig"][0]) < 2.0]
-                if near and near[0].valid:
-                    rows.append((near[0].payload_kg - tp.payload_kg, tp.crb_kg))
+            out[(amp, tau, name)] = [(r["err"], r["crb"])
+                                     for r in pa.passes(params, res, table, cfg) if r["valid"]]
     return out
 
 
