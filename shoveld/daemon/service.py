@@ -504,6 +504,13 @@ class Service:
                         else {"device": self.cfg.loop.sync, "state": "off"})
         loop["tick_errors"] = self.tick_errors
         loop["failing_now"] = self._consecutive_errors
+        if self.engine is not None:
+            # how often a pass's first moments out of the bank agreed with the rest of it
+            # (docs/engine.md, "The settle time, tested"): many refusals say the bank still
+            # holds the dipper past the phase machine's exit, for the field engineer
+            e = self.engine
+            loop["settle_time"] = {"seconds": e.cfg.settle_s, "kept": e.settle_kept,
+                                   "refused": e.settle_refused}
         zen = self.publisher.health()
         persist = {"passes_written": self.passes_written, "queue": self._q.qsize(),
                    "last_error": self.persist_error}

@@ -83,6 +83,10 @@ def test_table_through_the_service_to_zenoh(tmp_path: Path, e2e_table: SignalsTa
     assert set(h["drivers"]) == {"mti", "laser", "adc_motors", "adc_incl"}
     assert {"connected", "rate_hz", "age_s", "bad_frames", "timeouts"} <= set(h["drivers"]["mti"])
     assert {"rate_hz", "overruns", "ticks"} <= set(h["loop"])
+    # every pass's settle time was tested (kept or left out), and health says so
+    assert svc.engine is not None and svc.engine.settle_kept + svc.engine.settle_refused == 3
+    settle = h["loop"]["settle_time"]
+    assert settle["seconds"] == 0.4 and settle["kept"] + settle["refused"] <= 3
     st = replies[0].ok
     assert str(st.encoding) == "application/json"
     import json
