@@ -15,15 +15,23 @@ and sensor noise; then the diagnosis. Prints
     .venv/bin/python bench/diagnose_matrix.py [--seeds 6] [--null 20] [--pairs 10]
                                               [--pair-effects NAME,...] [--passes 24]
                                               [--jobs 2] [--json out.json]
+                                              [--progress cases.jsonl] [--cache DIR]
+                                              [--select KEY=VALUE ...]
+
+``--progress`` keeps each case with every step's candidates and verdicts;
+``--cache`` keeps each case's fitted models, so a later run with other ``--select``
+settings (``shoveld.diagnose.select.SelectionConfig``) judges the same fits.
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import itertools
 import json
 import math
 import os
+import pickle
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any
@@ -77,17 +85,34 @@ def one(job: dict[str, Any]) -> dict[str, Any]:
         ev = evaluate(ds, [], {}, np.ones(2), valid)
         e = ev.payload_errors(ds.passes)
         return {**job, "base_rms": float(np.sqrt(np.mean(e**2))), "crb": crb}
-    d = diagnose(calib, measured, engine=False)
+    from shoveld.diagnose.select import SelectionConfig
+
+    cache: dict[tuple[str, ...], Any] = {}
+    path = (os.path.join(job["cache"], hashlib.sha1(_key(job).encode()).hexdigest()[:16]
+                         + ".pkl") if job.get("cache") else None)
+    if path and os.path.exists(path):
+        with open(path, "rb") as f:
+            cache = pickle.load(f)
+    d = diagnose(calib, measured, cfg=SelectionConfig(**job.get("select", {})),
+                 engine=False, cache=cache)
+    if path:
+        with open(path, "wb") as f:
+            pickle.dump(d.selection.evaluations, f)
     t2 = time.perf_counter()
     b = d.payload("base")
     x = d.payload("extended")
     return {**job, "found": d.found, "crb": crb, "base_rms": b.get("rms_kg", math.nan),
             "ext_rms": x.get("rms_kg", math.nan), "base_mean": b.get("mean_kg", math.nan),
             "ext_mean": x.get("mean_kg", math.nan), "sim_s": t1 - t0, "diag_s": t2 - t1,
-            "scores": {c.name: round(c.gain, 4) for c in d.selection.steps[0].candidates}}
+            "scores": {c.name: round(c.gain, 4) for c in d.selection.steps[0].candidates},
+            "steps": [{"model": st.model, "chosen": st.chosen,
+                       "candidates": [c.as_dict() for c in st.candidates],
+                       "pairs": [c.as_dict() for c in st.pairs]}
+                      for st in d.selection.steps]}
 
 
 def _key(case: dict[str, Any]) -> str:
+    """A case by what it simulates (its data), not by how it is judged."""
     return json.dumps([case["kind"], case["truth"], case["seed"], case["spec"]], sort_keys=True)
 
 
@@ -101,6 +126,29 @@ def run_all(jobs: list[dict[str, Any]], workers: int, progress: str | None
                 with open(progress, "a") as out:
                     out.write(json.dumps(f.result(), default=str) + "\n")
         return [f.result() for f in futures]
+
+
+def _settings(items: list[str]) -> dict[str, Any]:
+    """``--select KEY=VALUE`` items as SelectionConfig keywords, typed as the defaults."""
+    from dataclasses import fields
+
+    from shoveld.diagnose.select import SelectionConfig
+
+    known = {f.name: f for f in fields(SelectionConfig)}
+    default = SelectionConfig()
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or key not in known:
+            raise SystemExit(f"--select {item!r}: expected KEY=VALUE with KEY one of "
+                             f"{sorted(known)}")
+        kind = type(getattr(default, key))
+        try:
+            out[key] = (value.lower() in ("1", "true", "yes") if kind is bool
+                        else kind(value))
+        except ValueError:
+            raise SystemExit(f"--select {item!r}: {key} expects a {kind.__name__}") from None
+    return out
 
 
 def main() -> None:
@@ -119,6 +167,12 @@ def main() -> None:
     ap.add_argument("--progress", help="append each case to this file (JSON lines) as it "
                                        "ends; a run given the same file again skips the "
                                        "cases it holds (resume)")
+    ap.add_argument("--select", action="append", default=[], metavar="KEY=VALUE",
+                    help="a selection setting (shoveld.diagnose.select.SelectionConfig) other "
+                         "than its default, e.g. payload_alpha=0.1; may be repeated")
+    ap.add_argument("--cache", metavar="DIR",
+                    help="keep each case's fitted models here and reuse them on a later run "
+                         "(the same cases judged by other --select settings in minutes)")
     ap.add_argument("--ideal", action="store_true",
                     help="the ideal simulator (the old matrix); default: realistic machines, "
                          "one drawn per case")
@@ -155,16 +209,23 @@ def main() -> None:
             jobs.append({"kind": "alone", "truth": n, "spec": {n: spec[n]}, "seed": 800 + s,
                          "passes": args.passes, "base_only": True, "pair": f"{a}+{b}"})
     t0 = time.perf_counter()
+    select = _settings(args.select)
+    if args.cache:
+        os.makedirs(args.cache, exist_ok=True)
     for j in jobs:
         j["ideal"] = bool(args.ideal)
+        if select:
+            j["select"] = select
+        if args.cache:
+            j["cache"] = args.cache
     if args.load:
         with open(args.load) as f:
             text = f.read()
         results = (json.loads(text) if text.lstrip().startswith("[")
                    else [json.loads(line) for line in text.splitlines() if line.strip()])
-        names = sorted({r["truth"] for r in results if r["kind"] == "single"})
-        args.seeds = max(sum(1 for r in results if r["kind"] == "single" and r["truth"] == n)
-                         for n in names)
+        names = sorted({r["truth"] for r in results if r["kind"] == "single"}) or names
+        args.seeds = max((sum(1 for r in results if r["kind"] == "single" and r["truth"] == n)
+                          for n in names), default=0)
     else:
         done: list[dict[str, Any]] = []
         if args.progress and os.path.exists(args.progress):

@@ -99,8 +99,10 @@ def engine_payloads(dataset: DataSet, ev: Evaluation) -> dict[int, float]:
 
 def diagnose(calib: list[SignalsTable], measured: list[SignalsTable],
              library: list[str] | None = None, cfg: SelectionConfig | None = None,
-             method: str = "output", engine: bool = True) -> Diagnosis:
-    """Run the whole diagnosis (see the package doc)."""
+             method: str = "output", engine: bool = True,
+             cache: dict[tuple[str, ...], Evaluation] | None = None) -> Diagnosis:
+    """Run the whole diagnosis (see the package doc). ``cache``: as ``forward_select``'s
+    (evaluations of a former run on the same data)."""
     cfg = cfg or SelectionConfig()
     library = list(library or EFFECT_TERMS)
     unknown = [n for n in library if n not in TERMS]
@@ -116,7 +118,7 @@ def diagnose(calib: list[SignalsTable], measured: list[SignalsTable],
     # common unit of all losses, so both channels weigh alike.
     probe = residuals(ds, evaluate(ds, [], {}, np.ones(2), valid_ref, method), valid_ref)
     sigma0 = np.array([probe.rms()["hoist_A"], probe.rms()["crowd_A"]])
-    sel = forward_select(ds, library, sigma0, valid_ref, cfg, method)
+    sel = forward_select(ds, library, sigma0, valid_ref, cfg, method, cache)
     t2 = time.perf_counter()
     ext = sel.extended
     train = {p.index for p in ds.passes if p.verified} if ext.cross_validated else None

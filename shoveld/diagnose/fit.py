@@ -194,16 +194,18 @@ def score_pass(params: ModelParams, dataset: DataSet, p: Pass, sigma0: np.ndarra
 
 def evaluate(dataset: DataSet, effects: list[str], hyper: dict[str, dict[str, Any]],
              sigma0: np.ndarray, valid_ref: list[np.ndarray], method: str = "output",
-             final: bool = False, fold_hyper: list[dict[str, dict[str, Any]]] | None = None
-             ) -> Evaluation:
+             final: bool = False, fold_hyper: list[dict[str, dict[str, Any]]] | None = None,
+             folds: bool = False) -> Evaluation:
     """Fit and judge base + ``effects`` on held-out passes (see the module doc).
 
     ``fold_hyper`` gives, per fold, hyper-parameters already found on that fold's
     training data (by the model this one extends), so they are not searched again.
+    ``folds``: identify on the trials plus the other folds' verified passes even if the
+    trials alone would do (the reference a cross-validated candidate is judged against).
     """
     passes = dataset.passes
     model = Model.from_names(effects, hyper)
-    cv = needs_operation(model, dataset)
+    cv = folds or needs_operation(model, dataset)
     n_ver = sum(p.verified for p in passes)
     if cv and n_ver < 2:
         raise ValueError(f"{effects}: the calibration trials do not swing and fewer than two "
@@ -211,20 +213,20 @@ def evaluate(dataset: DataSet, effects: list[str], hyper: dict[str, dict[str, An
     if not cv:
         params = fit(dataset, effects, hyper, None, method)
         fold_of = {p.index: 0 for p in passes}
-        folds = [params]
+        fitted = [params]
     else:
         k = min(N_FOLDS, n_ver)
         fold_of = assign_folds(passes, k)
-        folds = []
+        fitted = []
         for j in range(k):
             train = {p.index for p in passes if p.verified and fold_of[p.index] != j}
             h = {**{e: dict(v) for e, v in (fold_hyper[j] if fold_hyper and j < len(
                 fold_hyper) else {}).items() if e in effects}, **hyper}
-            folds.append(fit(dataset, effects, h, train, method))
-    scores = {p.index: score_pass(folds[fold_of[p.index]], dataset, p, sigma0, valid_ref)
+            fitted.append(fit(dataset, effects, h, train, method))
+    scores = {p.index: score_pass(fitted[fold_of[p.index]], dataset, p, sigma0, valid_ref)
               for p in passes}
-    ev = Evaluation(list(effects), folds, fold_of, scores, cv)
+    ev = Evaluation(list(effects), fitted, fold_of, scores, cv)
     if final:
-        ev.final = folds[0] if not cv else fit(
+        ev.final = fitted[0] if not cv else fit(
             dataset, effects, hyper, {p.index for p in passes if p.verified}, method)
     return ev

@@ -56,6 +56,15 @@ class SelectionConfig:
     """A candidate must cut the verified held-out passes' payload errors at this one-sided
     significance (t test on the squares or signed ranks of |e|, each at half of it;
     1.0: no payload test)."""
+    same_data: bool = False
+    """Judge a candidate identified with the verified passes (it needs a full dipper or
+    swinging, ``fit.needs_operation``) against the current model identified on the same
+    folds, not on the trials alone, so that what the passes teach the base model's own
+    parameters is not credited to the candidate's term. Off by default: measured on the
+    bench (docs/diagnosis.md, 2026-11-27) it stops the cubic saturation standing in for
+    other effects, but the knee-shaped saturation alone is then named on 0 of 3
+    machines (3 of 3 without it): the base identified with the passes takes most of its
+    payload error (681 -> 392 kg), so the term no longer pays."""
     payload_tolerance: float = math.inf
     """If finite, a candidate may not raise the held-out payload RMS error by more than
     this many times the payload uncertainty its own calibration implies. Off by
@@ -184,6 +193,9 @@ def compare(dataset: DataSet, cur: Evaluation, cand: Evaluation, name: str, n_tr
 
 
 PAYLOAD_ONLY = "does not pay on the payload"
+FOLDS = "@folds"
+"""Marks a cache key whose model was identified on the folds' verified passes although
+the trials alone would do (``SelectionConfig.same_data``)."""
 
 
 def _pair(dataset: DataSet, cur: Evaluation, scores: list[CandidateScore],
@@ -202,12 +214,20 @@ def _pair(dataset: DataSet, cur: Evaluation, scores: list[CandidateScore],
     n_tried = n_single + len(pairs)
     best: CandidateScore | None = None
     tried: list[CandidateScore] = []
+
+    def reference(cand: Evaluation, plain: Evaluation, names: list[str]) -> Evaluation:
+        """``plain``, or the same model identified on the candidate's folds (``same_data``)."""
+        if cfg.same_data and cand.cross_validated and not plain.cross_validated:
+            return fit(names, True)
+        return plain
+
     for a, b in pairs:
         names = [a.name, b.name]
         both = fit(names)
-        s = compare(dataset, cur, both, "+".join(names), n_tried, cfg)
+        s = compare(dataset, reference(both, cur, []), both, "+".join(names), n_tried, cfg)
         for one, other in ((a.name, b.name), (b.name, a.name)):
-            inc = compare(dataset, fit([other]), both, one, n_tried, cfg)
+            inc = compare(dataset, reference(both, fit([other]), [other]), both, one,
+                          n_tried, cfg)
             if s.significant and not (inc.t > inc.t_crit and inc.gain >= cfg.min_gain):
                 s.significant = False
                 s.why = (f"{one} adds {100 * inc.gain:.1f} % (t {inc.t:.2f}) to {other}: "
@@ -220,20 +240,30 @@ def _pair(dataset: DataSet, cur: Evaluation, scores: list[CandidateScore],
 
 def forward_select(dataset: DataSet, library: list[str], sigma0: np.ndarray,
                    valid_ref: list[np.ndarray], cfg: SelectionConfig | None = None,
-                   method: str = "output") -> Selection:
-    """Add the most effective significant candidate while one is significant."""
-    cfg = cfg or SelectionConfig()
-    cache: dict[tuple[str, ...], Evaluation] = {}
-    fixed_hyper: dict[str, dict[str, Any]] = {}
+                   method: str = "output",
+                   cache: dict[tuple[str, ...], Evaluation] | None = None) -> Selection:
+    """Add the most effective significant candidate while one is significant.
 
-    def ev(effects: list[str], parent: Evaluation | None = None) -> Evaluation:
-        key = tuple(effects)
+    ``cache``: evaluations already fitted on this dataset, by their effects (a former
+    run's ``Selection.evaluations``), so the bench can judge other selection rules on
+    the same fits; it is filled as models are fitted."""
+    cfg = cfg or SelectionConfig()
+    cache = {} if cache is None else cache
+    fixed_hyper: dict[str, dict[str, Any]] = {}
+    for key, done in cache.items():
+        if not done.cross_validated:
+            for e in key:
+                fixed_hyper.setdefault(e, done.hyper().get(e, {}))
+
+    def ev(effects: list[str], parent: Evaluation | None = None, folds: bool = False
+           ) -> Evaluation:
+        key = (*effects, FOLDS) if folds else tuple(effects)
         if key not in cache:
             hyper = {e: dict(fixed_hyper[e]) for e in effects if e in fixed_hyper}
             fold_hyper = ([dict(f.hyper) for f in parent.folds]
                           if parent is not None and parent.cross_validated else None)
             cache[key] = evaluate(dataset, effects, hyper, sigma0, valid_ref, method,
-                                  fold_hyper=fold_hyper)
+                                  fold_hyper=fold_hyper, folds=folds)
             # A hyper-parameter found on the calibration trials alone (a sensor delay) is
             # kept for the later steps; one found on folds of passes is searched again.
             for e in effects:
@@ -250,8 +280,18 @@ def forward_select(dataset: DataSet, library: list[str], sigma0: np.ndarray,
         if not todo:
             break
         cur = ev(current)
-        scores = [compare(dataset, cur, ev([*current, c], cur), c, len(todo), cfg)
-                  for c in todo]
+
+        def reference(cand: Evaluation, now: list[str] = current, plain: Evaluation = cur
+                      ) -> Evaluation:
+            """The current model identified on the data the candidate was (``same_data``)."""
+            if cfg.same_data and cand.cross_validated and not plain.cross_validated:
+                return ev(now, folds=True)
+            return plain
+
+        scores = []
+        for c in todo:
+            cand = ev([*current, c], cur)
+            scores.append(compare(dataset, reference(cand), cand, c, len(todo), cfg))
         scores.sort(key=lambda s: -s.gain if math.isfinite(s.gain) else math.inf)
         sig = [s for s in scores if s.significant]
         chosen = sig[0].name if sig else None
@@ -260,7 +300,8 @@ def forward_select(dataset: DataSet, library: list[str], sigma0: np.ndarray,
         if not sig and len(current) + 2 <= cfg.max_effects:
             pair, tried_pairs = _pair(
                 dataset, cur, scores, cfg, len(todo),
-                lambda names, now=current, parent=cur: ev([*now, *names], parent))
+                lambda names, folds=False, now=current, parent=cur: ev(
+                    [*now, *names], parent, folds))
             if pair is not None:
                 added = pair.name.split("+")
                 chosen = pair.name

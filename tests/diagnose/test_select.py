@@ -83,3 +83,36 @@ def test_the_summary_lists_a_pair_and_reads_its_terms_as_added() -> None:
     assert [ln.split()[-1] for ln in text.splitlines() if ln.startswith(("a ", "b "))] == \
         ["added", "added"]
     assert "held-out payload (1 verified pass)" in text
+
+
+def test_same_data_judges_a_term_fitted_on_the_passes_against_the_base_fitted_there(
+        monkeypatch: Any) -> None:
+    """A candidate that needs the verified passes (a full dipper, swinging) is fitted on
+    them; the passes also correct the base model's own parameters. Judged against the
+    base on the trials alone (the default), that correction is credited to the
+    candidate's term; ``same_data`` (an option, docs/diagnosis.md) judges it fairly."""
+    import shoveld.diagnose.select as select
+
+    def cv(ev: Any) -> Any:
+        ev.cross_validated = True
+        ev.folds = []
+        return ev
+
+    # the base on the trials alone: 400 kg; the same base on the passes: 200 kg; the
+    # candidate "sat" (fitted on the passes) 190 kg, about the base on the passes.
+    made = {("base", False): model(1.0, 400.0), ("base", True): cv(model(0.9, 200.0)),
+            ("sat", True): cv(model(0.88, 190.0)), ("x", False): model(1.0, 400.0)}
+
+    def evaluate(dataset: Any, effects: list[str], *args: Any, folds: bool = False,
+                 **kwargs: Any) -> Any:
+        name = effects[-1] if effects else "base"
+        return made[(name, folds or name == "sat")]
+
+    monkeypatch.setattr(select, "evaluate", evaluate)
+    run = select.forward_select
+    plain = run(DATA, ["sat", "x"], np.ones(2), [], SelectionConfig())
+    assert plain.found == ["sat"]  # credited with what the passes did for the base
+    fair = run(DATA, ["sat", "x"], np.ones(2), [], SelectionConfig(same_data=True))
+    assert fair.found == []
+    sat = next(c for c in fair.steps[0].candidates if c.name == "sat")
+    assert not sat.significant and sat.gain < 0.05, sat  # 12 % against the trials' base
