@@ -160,6 +160,11 @@ def main() -> None:
                     help="draw the pairs among these effects only (e.g. those whose typical "
                          "range moves the payload by >= 0.5 %% of rated on its own)")
     ap.add_argument("--passes", type=int, default=24)
+    ap.add_argument("--draw-seed", type=int, default=20261122,
+                    help="seed of the magnitudes' and pairs' draws (another gives other "
+                         "cases: a rule chosen on one set of cases checked on another)")
+    ap.add_argument("--seed-offset", type=int, default=0,
+                    help="added to every case's machine and session seed (other machines)")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--json", help="write all cases to this file")
     ap.add_argument("--load", help="print the matrix of cases saved by --progress or --json "
@@ -181,16 +186,17 @@ def main() -> None:
     from shoveld.sim.effects import SIM_EFFECTS
 
     names = sorted(SIM_EFFECTS)
-    rng = np.random.default_rng(20261122)
+    rng = np.random.default_rng(args.draw_seed)
+    off = args.seed_offset
     jobs: list[dict[str, Any]] = []
     for name in names:
         lo, hi = SIM_EFFECTS[name].typical_range
         for s in range(args.seeds):
             mag = float(round(rng.uniform(lo, hi), 3))
             jobs.append({"kind": "single", "truth": name, "spec": {name: mag},
-                         "seed": 100 + s, "passes": args.passes})
+                         "seed": off + 100 + s, "passes": args.passes})
     for s in range(args.null):
-        jobs.append({"kind": "null", "truth": "none", "spec": {}, "seed": 500 + s,
+        jobs.append({"kind": "null", "truth": "none", "spec": {}, "seed": off + 500 + s,
                      "passes": args.passes})
     pool = [n for n in (args.pair_effects.split(",") if args.pair_effects else names)
             if n not in MODELLED_BY_BASE]
@@ -203,10 +209,10 @@ def main() -> None:
                                      replace=False)):
         a, b = pairs[int(k)]
         spec = {n: float(round(rng.uniform(*SIM_EFFECTS[n].typical_range), 3)) for n in (a, b)}
-        jobs.append({"kind": "pair", "truth": f"{a}+{b}", "spec": spec, "seed": 800 + s,
+        jobs.append({"kind": "pair", "truth": f"{a}+{b}", "spec": spec, "seed": off + 800 + s,
                      "passes": args.passes})
         for n in (a, b):
-            jobs.append({"kind": "alone", "truth": n, "spec": {n: spec[n]}, "seed": 800 + s,
+            jobs.append({"kind": "alone", "truth": n, "spec": {n: spec[n]}, "seed": off + 800 + s,
                          "passes": args.passes, "base_only": True, "pair": f"{a}+{b}"})
     t0 = time.perf_counter()
     select = _settings(args.select)
