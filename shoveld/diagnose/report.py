@@ -113,7 +113,10 @@ def as_json(d: Diagnosis) -> dict[str, Any]:
                    "passes": len(ds.passes), "verified_passes": len(d.verified)}
     cfg = d.config
     out["method"] = {"alpha": cfg.alpha, "min_gain": cfg.min_gain,
-                     "max_effects": cfg.max_effects,
+                     "max_effects": cfg.max_effects, "payload_alpha": cfg.payload_alpha,
+                     "decisive_gain": (cfg.decisive_gain if math.isfinite(cfg.decisive_gain)
+                                       else None),
+                     "same_data": cfg.same_data,
                      "test": "per-pass held-out loss differences, one-sided t, Bonferroni "
                              "over the candidates of a step"}
     out["timing_s"] = {k: round(v, 3) for k, v in d.timing.items()}
@@ -326,6 +329,12 @@ def write_report(d: Diagnosis, out_dir: str | Path) -> Path:
               "pass on data it was not fitted on. A candidate is added when the per-pass "
               f"improvement is significant (one-sided t, family-wise alpha {d.config.alpha} per "
               f"step), removes at least {100 * d.config.min_gain:.0f} % of the held-out residual, "
-              "and does not worsen the held-out payload; the search repeats until none is."]
+              "and cuts the verified passes' payload errors significantly"
+              + (f" (or, where it removes at least {100 * d.config.decisive_gain:.0f} % of the "
+                 "residual, does not raise their payload RMS)"
+                 if math.isfinite(d.config.decisive_gain) else "")
+              + ("; a candidate identified with the verified passes is judged against the "
+                 "current model identified on the same passes" if d.config.same_data else "")
+              + ". The search repeats until none qualifies."]
     (out / "report.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
     return out / "report.md"
