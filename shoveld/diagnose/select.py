@@ -31,6 +31,7 @@ when none is significant ("nothing significant" is an answer).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -214,6 +215,17 @@ FOLDS = "@folds"
 the trials alone would do (``SelectionConfig.same_data``)."""
 
 
+def _reference(cfg: SelectionConfig, cand: Evaluation, plain: Evaluation,
+               refit: Callable[[], Evaluation]) -> Evaluation:
+    """What ``cand`` is judged against: ``plain``, or, when the candidate was identified
+    on the folds' verified passes and ``plain`` was not, the same model as ``plain``
+    identified there too (``same_data``), so that a candidate is not credited with what
+    the passes teach any model."""
+    if cfg.same_data and cand.cross_validated and not plain.cross_validated:
+        return refit()
+    return plain
+
+
 def _pair(dataset: DataSet, cur: Evaluation, scores: list[CandidateScore],
           cfg: SelectionConfig, n_single: int, fit: Any
           ) -> tuple[CandidateScore | None, list[CandidateScore]]:
@@ -231,19 +243,14 @@ def _pair(dataset: DataSet, cur: Evaluation, scores: list[CandidateScore],
     best: CandidateScore | None = None
     tried: list[CandidateScore] = []
 
-    def reference(cand: Evaluation, plain: Evaluation, names: list[str]) -> Evaluation:
-        """``plain``, or the same model identified on the candidate's folds (``same_data``)."""
-        if cfg.same_data and cand.cross_validated and not plain.cross_validated:
-            return fit(names, True)
-        return plain
-
     for a, b in pairs:
         names = [a.name, b.name]
         both = fit(names)
-        s = compare(dataset, reference(both, cur, []), both, "+".join(names), n_tried, cfg)
+        s = compare(dataset, _reference(cfg, both, cur, lambda: fit([], True)), both,
+                    "+".join(names), n_tried, cfg)
         for one, other in ((a.name, b.name), (b.name, a.name)):
-            inc = compare(dataset, reference(both, fit([other]), [other]), both, one,
-                          n_tried, cfg)
+            alone = _reference(cfg, both, fit([other]), lambda o=other: fit([o], True))
+            inc = compare(dataset, alone, both, one, n_tried, cfg)
             if s.significant and not (inc.t > inc.t_crit and inc.gain >= cfg.min_gain):
                 s.significant = False
                 s.why = (f"{one} adds {100 * inc.gain:.1f} % (t {inc.t:.2f}) to {other}: "
@@ -296,18 +303,11 @@ def forward_select(dataset: DataSet, library: list[str], sigma0: np.ndarray,
         if not todo:
             break
         cur = ev(current)
-
-        def reference(cand: Evaluation, now: list[str] = current, plain: Evaluation = cur
-                      ) -> Evaluation:
-            """The current model identified on the data the candidate was (``same_data``)."""
-            if cfg.same_data and cand.cross_validated and not plain.cross_validated:
-                return ev(now, folds=True)
-            return plain
-
         scores = []
         for c in todo:
             cand = ev([*current, c], cur)
-            scores.append(compare(dataset, reference(cand), cand, c, len(todo), cfg))
+            ref = _reference(cfg, cand, cur, lambda now=current: ev(now, folds=True))
+            scores.append(compare(dataset, ref, cand, c, len(todo), cfg))
         scores.sort(key=lambda s: -s.gain if math.isfinite(s.gain) else math.inf)
         sig = [s for s in scores if s.significant]
         chosen = sig[0].name if sig else None
