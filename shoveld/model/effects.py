@@ -547,20 +547,29 @@ class LoadDependentFriction(ExtensionTerm):
 
 @register_term
 class CurrentSaturation(ExtensionTerm):
-    """Hoist force is not linear in armature current at high current.
+    """Hoist force falls behind the armature current above a knee.
 
-    Armature reaction and saturation of the magnetic circuit reduce the flux as the
-    armature current grows. To third order (the force is odd in the current):
-    F_H = K_H i_H - K_H3 i_H^3 / I_ref^2, with a reference current I_ref (a scale
-    only); the crowd motor's likewise (``K_C3``, reference 150 A). Both cubics use the
-    current estimated from the neighbouring samples (``Kinematics.i_h_est``,
-    ``i_c_est``): the currents are the outputs, and a column built from a sample's own
-    measured current lets the fit predict that sample's noise (the crowd cubic once did,
-    and took 2-3 % of the held-out residual on every realistic machine).
+    Armature reaction and the saturating pole tips reduce the flux as the armature
+    current grows: the torque curve is straight at low current and flatter above. The
+    hoist pull is a linear spline with one knot, F_H = K_H i_H - K_H3 h(i_H - i_k), h a
+    hinge (zero below the knee i_k, the current above it) rounded over
+    ``KNEE_ROUND_A``: K_H3 / K_H is how much less pull an ampere gives above the knee.
+    The knee is a knot at the median of the hoist current in the data, as splines place
+    their knots at quantiles: the fit's residual cannot place it (on the bench it chose
+    knees near the top of the range, where the held-out payload was worst), and with
+    the knot in the middle of the data each half of the curve gets its own slope. On
+    the bench's 3 + 3 machines a cubic (the Taylor form of a smooth curve) left twice
+    the held-out payload error of the spline, on smooth and on knee-shaped curves
+    alike (docs/diagnosis.md). The crowd motor keeps a cubic (``K_C3``, reference
+    150 A). Both use the current estimated from the neighbouring samples
+    (``Kinematics.i_h_est``, ``i_c_est``): the currents are the outputs, and a column
+    built from a sample's own measured current lets the fit predict that sample's noise
+    (the crowd cubic once did, and took 2-3 % of the held-out residual on every
+    realistic machine).
 
     The calibration trials (empty, one known load) stay below a full dipper's currents,
-    where saturation bites hardest, and a cubic fitted there extrapolates badly; the
-    diagnosis identifies the term with the verified passes too (``needs_full_dipper``).
+    where saturation bites hardest; the diagnosis identifies the term with the verified
+    passes too (``needs_full_dipper``).
     """
 
     name = "current_saturation"
@@ -570,15 +579,31 @@ class CurrentSaturation(ExtensionTerm):
     cause = ("at high current the hoist motors give less pull per ampere "
              "(armature reaction, magnetic saturation)")
     signature = "hoist_current"
-    defaults = {"ref_a": 500.0, "crowd_ref_a": 150.0}
+    defaults = {"knee_a": 250.0, "crowd_ref_a": 150.0}
     static_params = ("K_H3", "K_C3")
     needs_full_dipper = True
+    KNEE_ROUND_A: ClassVar[float] = 20.0
+
+    def search_hyper(self, cal: Any, tables: list[Any]) -> None:
+        """The knee at the median hoist current of ``tables`` (unless given); the
+        default stands where the tables carry no hoist current."""
+        if "knee_a" in self.given:
+            return
+        self.given.add("knee_a")
+        i_h = [np.abs(np.asarray(t.columns["hoist1_a"]) + np.asarray(t.columns["hoist2_a"]))
+               for t in tables if {"hoist1_a", "hoist2_a"} <= set(t.columns)]
+        i = np.concatenate(i_h) if i_h else np.zeros(0)
+        i = i[np.isfinite(i)]
+        if len(i):
+            self.hyper["knee_a"] = float(np.round(np.median(i)))
 
     def columns(self, k: Kinematics) -> np.ndarray:
         u_th, u_d = _unit_hoist(k)
-        ih3 = k.i_h_est**3 / self.h("ref_a") ** 2
+        w = self.KNEE_ROUND_A
+        i = k.i_h_est
+        above = np.sign(i) * w * np.logaddexp(0.0, (np.abs(i) - self.h("knee_a")) / w)
         ic3 = k.i_c_est**3 / self.h("crowd_ref_a") ** 2
-        return _stack((-ih3 * u_th, -ih3 * u_d), (np.zeros_like(ic3), ic3))
+        return _stack((-above * u_th, -above * u_d), (np.zeros_like(ic3), ic3))
 
     def shared_columns(self, k: Kinematics) -> dict[str, np.ndarray]:
         """At held poses, the crowd column takes the crowd current's neighbour estimate.
@@ -593,12 +618,12 @@ class CurrentSaturation(ExtensionTerm):
         return {"K_C": np.stack([np.zeros_like(fix), fix], axis=-1)}
 
     def derived(self, values: dict[str, float]) -> dict[str, float]:
-        return {"hoist force deficit at the reference current":
+        return {f"hoist pull per ampere lost above the knee at {self.h('knee_a'):g} A":
                 values["K_H3"] / values["K_H"]}
 
     def quantities(self) -> list[tuple[str, str, Callable[[dict[str, float]], float]]]:
-        ref = self.h("ref_a")
-        return [(f"hoist pull short of linear at {ref:g} A", "%",
+        knee = self.h("knee_a")
+        return [(f"hoist pull per ampere above {knee:g} A, short of below it", "%",
                  lambda v: 100.0 * v["K_H3"] / v["K_H"])]
 
 

@@ -190,3 +190,31 @@ def test_params_file_records_terms_and_hyper(tmp_path) -> None:
     assert skew.hyper["delay_s"] == 0.08 and "delay_s" in skew.given
     k = _kin()
     assert np.allclose(m2.regressor(k)[0], model.regressor(k)[0])
+
+
+def test_the_saturation_knee_sits_at_the_median_hoist_current_and_bends_the_pull() -> None:
+    """The knee is a spline knot placed at the median of the data's hoist current (not
+    searched on the residual); below it the term adds nothing, above it it takes a
+    fixed share of every further ampere."""
+    from types import SimpleNamespace
+
+    i1 = np.array([50.0, 100.0, 150.0, 200.0, np.nan])
+    tables = [SimpleNamespace(columns={"hoist1_a": i1, "hoist2_a": i1 + 10.0}),
+              SimpleNamespace(columns={"hoist1_a": -i1, "hoist2_a": -i1})]
+    term = TERMS["current_saturation"]()
+    term.search_hyper(None, tables)
+    assert term.h("knee_a") == np.median([110, 210, 310, 410, 100, 200, 300, 400])
+    given = TERMS["current_saturation"](knee_a=333.0)
+    given.search_hyper(None, tables)
+    assert given.h("knee_a") == 333.0
+
+    k = _kin(200)
+    k = dataclasses.replace(k, i_h_est=np.linspace(-600.0, 600.0, 200))
+    u_th, _ = _unit_hoist(k)
+    col = TERMS["current_saturation"](knee_a=250.0).columns(k)[:, 0, 0] / -u_th
+    # five rounding widths (20 A) from the knee the hinge is within 20 ln(1 + e^-5) A
+    low = np.abs(k.i_h_est) < 150.0
+    high = k.i_h_est > 350.0
+    assert np.all(np.abs(col[low]) < 0.14)
+    assert np.allclose(col[high], k.i_h_est[high] - 250.0, atol=0.14)
+    assert np.allclose(col[::-1], -col)
