@@ -55,8 +55,9 @@ class SelectionConfig:
     """Smallest relative reduction of the held-out residual that counts as a finding."""
     max_effects: int = 3
     pair_among: int = 3
-    """Where no candidate is significant alone, pairs among this many of those that fail
-    only the payload test are tried together (``_pair``); 0: never."""
+    """Where no candidate is significant alone, pairs among this many of those that take
+    at least ``min_gain`` of the residual are tried together, and a decisive one that
+    fails only the payload test is tried beside every other (``_pair``); 0: never."""
     payload_alpha: float = 0.05
     """A candidate must cut the verified held-out passes' payload errors at this one-sided
     significance (t test on the squares or signed ranks of |e|, each at half of it;
@@ -226,19 +227,41 @@ def _reference(cfg: SelectionConfig, cand: Evaluation, plain: Evaluation,
     return plain
 
 
+def _pairs_to_try(scores: list[CandidateScore], cfg: SelectionConfig
+                  ) -> list[tuple[CandidateScore, CandidateScore]]:
+    """The pairs ``_pair`` fits: among the best ``cfg.pair_among`` candidates by their share
+    of the residual (each at least ``min_gain``, whatever test it failed alone), and each
+    decisive candidate that failed only the payload test beside every other one.
+
+    Two effects at once can hide each other: the friction and the slope each took 8-16 %
+    of the residual with a pass-to-pass spread too wide for significance alone, and
+    together 29 %; beside a knee-shaped saturation the slope's term made the residual
+    worse alone (the saturation's misfit dwarfs its share), while the saturation alone
+    took half the residual and pushed the payload 525 kg high (docs/diagnosis.md)."""
+    if cfg.pair_among <= 0:
+        return []
+    usable = [s for s in scores if math.isfinite(s.gain) and not s.why.startswith("unstable")]
+    pool = [s for s in usable if s.gain >= cfg.min_gain][:cfg.pair_among]
+    pairs = [(a, b) for k, a in enumerate(pool) for b in pool[k + 1:]]
+    for a in usable:
+        if a.why.startswith(PAYLOAD_ONLY) and a.gain >= cfg.decisive_gain:
+            pairs += [(a, b) for b in usable if b is not a
+                      and not any({a.name, b.name} == {x.name, y.name} for x, y in pairs)]
+    return pairs
+
+
 def _pair(dataset: DataSet, cur: Evaluation, scores: list[CandidateScore],
           cfg: SelectionConfig, n_single: int, fit: Any
           ) -> tuple[CandidateScore | None, list[CandidateScore]]:
-    """Two candidates that each take their share of the residual but fail the payload
-    test alone are tried together: where two effects act at once, a model with one of
-    them moves the payload towards the other's error, and only both in the model show
-    the gain. The pairs among the best ``cfg.pair_among`` such candidates are tried, with
-    the Bonferroni correction counting them beside the single candidates. Each term of a
-    pair must also earn its place beside the other, by the residual tests a next step
-    would apply (significant, and at least ``min_gain`` of what the other leaves): else a
-    term that fails the payload test for want of passes would bring in a passenger."""
-    held = [s for s in scores if s.why.startswith(PAYLOAD_ONLY)][:cfg.pair_among]
-    pairs = [(a, b) for k, a in enumerate(held) for b in held[k + 1:]]
+    """Two candidates that each fail alone are tried together (``_pairs_to_try``): where
+    two effects act at once, a model with one of them moves the payload towards the
+    other's error, or leaves the other's share hidden in the spread, and only both in
+    the model show the gain. The pair must be significant and pay on the payload, with
+    the Bonferroni correction counting the pairs beside the single candidates. Each term
+    of a pair must also earn its place beside the other, by the residual tests a next
+    step would apply (significant, and at least ``min_gain`` of what the other leaves):
+    else a term that fails alone would bring in a passenger."""
+    pairs = _pairs_to_try(scores, cfg)
     n_tried = n_single + len(pairs)
     best: CandidateScore | None = None
     tried: list[CandidateScore] = []

@@ -20,11 +20,12 @@ N = 16
 SIGN = np.where(np.arange(N) % 2 == 0, 1.0, -1.0)
 
 
-def model(loss: float, payload_err_kg: float) -> Any:
+def model(loss: float, payload_err_kg: float, spread: float = 0.02) -> Any:
     """Held-out scores of one model: about the same loss and payload error on every pass
-    (a spread of 2 % and 10 % of their own)."""
+    (log-normal loss of mean ``loss`` and log spread ``spread``; payload 10 %)."""
     rng = np.random.default_rng(int(1000 * loss + payload_err_kg))
-    scores = {i: SimpleNamespace(loss=loss * (1.0 + 0.02 * rng.standard_normal()),
+    scores = {i: SimpleNamespace(loss=loss * math.exp(spread * rng.standard_normal()
+                                                      - spread**2 / 2),
                                  calib_std_kg=10.0,
                                  payload_kg=10_000.0 + SIGN[i] * payload_err_kg
                                  * (1.0 + 0.1 * rng.standard_normal()))
@@ -64,6 +65,56 @@ def test_a_term_that_adds_nothing_beside_the_other_is_no_passenger() -> None:
     assert best is None
     ac = next(t for t in tried if set(t.name.split("+")) == {"a", "c"})
     assert "c adds" in ac.why and "not significant beside it" in ac.why
+
+
+def per_pass(loss: np.ndarray, payload_err_kg: float) -> Any:
+    """Held-out scores with the given loss on each pass (payload as in ``model``)."""
+    ev = model(1.0, payload_err_kg)
+    for i, sc in ev.scores.items():
+        sc.loss = float(loss[i])
+    return ev
+
+
+def test_two_shares_hidden_in_the_spread_alone_are_tried_together() -> None:
+    """Two effects that each take a share of the residual, but whose terms fitted alone
+    (biased by the other effect) make some passes worse: neither is significant alone,
+    both are together; a candidate below ``min_gain`` is not tried in a pair."""
+    cfg = SelectionConfig()
+    rng = np.random.default_rng(5)
+    noise = 1.0 + 0.02 * rng.standard_normal(N)
+    a, b = 0.5 * rng.uniform(0.0, 1.0, (2, N))  # each effect's share, pass by pass
+    bias_a, bias_b = 0.4 * rng.uniform(0.0, 1.0, (2, N)) ** 2  # a term fitted without the other
+    cur = per_pass(noise + a + b, 400.0)
+    models = {("a",): per_pass(noise + b + bias_a, 300.0),
+              ("b",): per_pass(noise + a + bias_b, 320.0),
+              ("c",): model(0.995 * (1.0 + float(np.mean(a + b))), 400.0),
+              ("a", "b"): per_pass(noise, 50.0),
+              ("a", "c"): per_pass(noise + b + bias_a, 300.0),
+              ("b", "c"): per_pass(noise + a + bias_b, 320.0)}
+    singles = [compare(DATA, cur, models[(n,)], n, 3, cfg) for n in ("a", "b", "c")]
+    assert [s.why.split(" (")[0] for s in singles[:2]] == ["not significant"] * 2, singles
+    assert all(s.gain >= cfg.min_gain for s in singles[:2]), singles
+    assert singles[2].gain < cfg.min_gain
+    best, tried = _pair(DATA, cur, singles, cfg, 3, lambda names: models[tuple(sorted(names))])
+    assert best is not None and set(best.name.split("+")) == {"a", "b"}
+    assert [t.name for t in tried] == ["a+b"] or [t.name for t in tried] == ["b+a"]
+
+
+def test_a_decisive_share_that_moves_the_payload_the_wrong_way_is_tried_beside_each_other(
+        ) -> None:
+    """A term that takes half the residual but pushes the payload high (the saturation
+    beside a slope), and a term that alone makes the residual a little worse (the slope,
+    hidden under the saturation's misfit), are added together when the pair pays."""
+    cfg = SelectionConfig()
+    cur = model(1.0, 400.0)
+    models = {("a",): model(0.5, 900.0), ("b",): model(1.04, 420.0),
+              ("c",): model(0.995, 400.0), ("a", "b"): model(0.4, 60.0),
+              ("a", "c"): model(0.5, 880.0), ("b", "c"): model(1.0, 410.0)}
+    singles = [compare(DATA, cur, models[(n,)], n, 3, cfg) for n in ("a", "b", "c")]
+    assert "held-out RMS rises" in singles[0].why and not any(s.significant for s in singles)
+    best, tried = _pair(DATA, cur, singles, cfg, 3, lambda names: models[tuple(sorted(names))])
+    assert best is not None and set(best.name.split("+")) == {"a", "b"}
+    assert sorted(t.name for t in tried) == ["a+b", "a+c"]
 
 
 def test_the_summary_lists_a_pair_and_reads_its_terms_as_added() -> None:
