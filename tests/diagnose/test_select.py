@@ -172,6 +172,37 @@ def test_same_data_judges_a_term_fitted_on_the_passes_against_the_base_fitted_th
     assert not sat.significant and sat.gain < 0.05, sat  # 12 % against the trials' base
 
 
+def test_a_term_the_trials_cannot_identify_is_identified_with_the_passes(
+        monkeypatch: Any) -> None:
+    """Fitted on the calibration trials alone (they swing a little), the swing's term
+    blows up on the passes; it is identified again with the verified passes, judged
+    against the base fitted there, and every later model with it is fitted there too."""
+    import shoveld.diagnose.select as select
+
+    def cv(ev: Any) -> Any:
+        ev.cross_validated = True
+        ev.folds = []
+        return ev
+
+    made = {((), False): model(1.0, 400.0), ((), True): cv(model(0.98, 390.0)),
+            (("sw",), False): model(30.0, 9000.0), (("sw",), True): cv(model(0.2, 60.0)),
+            (("x",), False): model(1.0, 400.0), (("sw", "x"), True): cv(model(0.2, 60.0))}
+    calls: list[tuple[tuple[str, ...], bool]] = []
+
+    def evaluate(dataset: Any, effects: list[str], *args: Any, folds: bool = False,
+                 **kwargs: Any) -> Any:
+        calls.append((tuple(effects), folds))
+        return made[(tuple(effects), folds)]
+
+    monkeypatch.setattr(select, "evaluate", evaluate)
+    sel = select.forward_select(DATA, ["sw", "x"], np.ones(2), [], SelectionConfig())
+    assert sel.found == ["sw"]
+    sw = next(c for c in sel.steps[0].candidates if c.name == "sw")
+    assert sw.significant and sw.cross_validated and sw.gain > 0.7, sw
+    assert (("sw",), False) in calls and (("sw", "x"), True) in calls
+    assert sel.extended is made[(("sw",), True)]
+
+
 def test_a_decisive_share_of_the_residual_needs_only_not_to_raise_the_payload_error(
         ) -> None:
     """A term that removes 30 % of the held-out residual is no artefact of the base
