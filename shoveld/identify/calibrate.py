@@ -37,10 +37,6 @@ from shoveld.signals.table import SignalsTable
 from shoveld.words import n_of
 
 METHODS = ("output", "equation")
-FIELD_KNOT_STEP_A = 10.0
-"""Spacing of the knots of the hoist's pull-per-ampere curve over the field current."""
-FIELD_KNOT_MIN_SAMPLES = 150
-"""Samples within half a step of a knot for the data to carry that knot."""
 
 
 @dataclass(frozen=True)
@@ -168,29 +164,6 @@ def fixed_load_trial(table: SignalsTable) -> bool:
     return bool(len(pay) and np.all(np.isfinite(pay)) and np.ptp(pay) == 0.0)
 
 
-def choose_field_knots(tables: list[SignalsTable], step: float = FIELD_KNOT_STEP_A,
-                       min_samples: int = FIELD_KNOT_MIN_SAMPLES) -> tuple[float, list[float]]:
-    """The nominal hoisting field and the knots where the data have field currents.
-
-    Nominal: the field the drive holds most of the time at speed (median of the upper
-    field values). Knots every ``step`` amps below (and one above) it, kept where at
-    least ``min_samples`` samples lie within half a step.
-    """
-    i_f = np.concatenate([t.columns["hoist_field_a"] for t in tables])
-    i_f = i_f[np.isfinite(i_f)]
-    if not len(i_f):
-        return 70.0, []
-    top = np.percentile(i_f, 95)
-    nominal = float(np.round(np.median(i_f[i_f > 0.85 * top])))
-    knots: list[float] = []
-    for kn in [nominal + step, *(nominal - step * j for j in range(1, 10))]:
-        if kn < 10.0:
-            break
-        if np.count_nonzero(np.abs(i_f - kn) < step / 2) >= min_samples:
-            knots.append(float(kn))
-    return nominal, sorted(knots)
-
-
 def integrated_autocorrelation(r: np.ndarray, max_lag: int = 200) -> float:
     """1 + 2 sum of the residual autocorrelation (until it falls below 0.05).
 
@@ -316,22 +289,6 @@ class Calibrator:
         return [exclusion_masks(t, self.model, self.exclusion, self.window_s, self.polyorder)
                 for t in tables]
 
-    def _choose_field_knots(self, tables: list[SignalsTable]) -> None:
-        """Give the hoist drive its field-current knots from the data, unless given."""
-        hoist = next((t for t in self.model.terms if t.name == "hoist_drive"), None)
-        ends = {"above_top_knot": "slope", "below_bottom_knot": "slope",
-                "spline_ends": "not-a-knot"}
-        if hoist is None or ("field_knots_a" in hoist.hyper
-                             and ends.keys() <= hoist.hyper.keys()):
-            return
-        if "field_knots_a" in hoist.hyper:
-            hyper = {**ends, **hoist.hyper}
-        else:
-            nominal, knots = choose_field_knots(tables)
-            hyper = {**hoist.hyper, "field_nominal_a": nominal, "field_knots_a": knots,
-                     **ends}
-        self.model = Model([type(hoist)(**hyper) if t is hoist else t for t in self.model.terms])
-
     def _rows(self, files: list[FileData]) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
         """Stacked (W + m Psi), y = -m phi of the used samples, and per file the per-row
         mask of equations that carry information."""
@@ -363,7 +320,11 @@ class Calibrator:
         method = {"joint": "equation", "staged": "equation"}.get(self.method, self.method)
         if method not in METHODS:
             raise ValueError(f"unknown method {self.method!r}; use one of {', '.join(METHODS)}")
-        self._choose_field_knots(tables)
+        # Hyper-parameters the data choose (knots where the data lie), then those found
+        # by fits (shoveld.model.effects).
+        terms = [t.for_data(tables) for t in self.model.terms]
+        if any(a is not b for a, b in zip(terms, self.model.terms, strict=True)):
+            self.model = Model(terms)
         for t in self.model.terms:
             # A term with a nonlinear constant (a delay, a radius) finds it first by a 1-D
             # search over fits of this same calibrator (shoveld.model.effects).

@@ -584,11 +584,11 @@ class CurrentSaturation(ExtensionTerm):
     needs_full_dipper = True
     KNEE_ROUND_A: ClassVar[float] = 20.0
 
-    def search_hyper(self, cal: Any, tables: list[Any]) -> None:
+    def for_data(self, tables: list[Any]) -> CurrentSaturation:
         """The knee at the median hoist current of ``tables`` (unless given); the
         default stands where the tables carry no hoist current."""
         if "knee_a" in self.given:
-            return
+            return self
         self.given.add("knee_a")
         i_h = [np.abs(np.asarray(t.columns["hoist1_a"]) + np.asarray(t.columns["hoist2_a"]))
                for t in tables if {"hoist1_a", "hoist2_a"} <= set(t.columns)]
@@ -596,6 +596,7 @@ class CurrentSaturation(ExtensionTerm):
         i = i[np.isfinite(i)]
         if len(i):
             self.hyper["knee_a"] = float(np.round(np.median(i)))
+        return self
 
     def columns(self, k: Kinematics) -> np.ndarray:
         u_th, u_d = _unit_hoist(k)

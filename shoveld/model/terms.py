@@ -89,6 +89,13 @@ class Term:
         linear in a measured current (None: the term does not use one)."""
         return None
 
+    def for_data(self, tables: list[Any]) -> Term:
+        """The term with the hyper-parameters its data choose, from the tables' columns
+        alone (knots at where the data lie), unless given; ``self`` when it has none.
+        Called by ``Calibrator.fit`` before any fit (a hyper-parameter found by fits is
+        ``search_hyper``'s job, ``shoveld.model.effects``)."""
+        return self
+
     def transform(self, cols: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         """Adjust the raw signals before kinematics (e.g. re-align a delayed stream).
 
@@ -322,6 +329,35 @@ def knot_group(name: str) -> str:
     return name if a is None else f"{FIELD_KNOT_PREFIX}{10 * round(a / 10):.0f}~"
 
 
+FIELD_KNOT_STEP_A = 10.0
+"""Spacing of the knots of the hoist's pull-per-ampere curve over the field current."""
+FIELD_KNOT_MIN_SAMPLES = 150
+"""Samples within half a step of a knot for the data to carry that knot."""
+
+
+def choose_field_knots(tables: list[Any], step: float = FIELD_KNOT_STEP_A,
+                       min_samples: int = FIELD_KNOT_MIN_SAMPLES) -> tuple[float, list[float]]:
+    """The nominal hoisting field and the knots where the data have field currents.
+
+    Nominal: the field the drive holds most of the time at speed (median of the upper
+    field values). Knots every ``step`` amps below (and one above) it, kept where at
+    least ``min_samples`` samples lie within half a step.
+    """
+    i_f = np.concatenate([t.columns["hoist_field_a"] for t in tables])
+    i_f = i_f[np.isfinite(i_f)]
+    if not len(i_f):
+        return 70.0, []
+    top = np.percentile(i_f, 95)
+    nominal = float(np.round(np.median(i_f[i_f > 0.85 * top])))
+    knots: list[float] = []
+    for kn in [nominal + step, *(nominal - step * j for j in range(1, 10))]:
+        if kn < 10.0:
+            break
+        if np.count_nonzero(np.abs(i_f - kn) < step / 2) >= min_samples:
+            knots.append(float(kn))
+    return nominal, sorted(knots)
+
+
 @register_term
 class HoistDrive(Term):
     """Hoist rope tension K_H(i_f) * i_H acting at the bail along the rope.
@@ -374,6 +410,20 @@ class HoistDrive(Term):
         if self.ends not in ("not-a-knot", "natural"):
             raise ValueError(f"hyper.hoist_drive.spline_ends: expected 'not-a-knot' or "
                              f"'natural', got {self.ends!r}")
+
+    def for_data(self, tables: list[Any]) -> Term:
+        """The field-current knots where the tables have field currents
+        (:func:`choose_field_knots`) and the curve's ends as the calibration writes them,
+        unless given (knots given without the ends: the ends added)."""
+        ends = {"above_top_knot": "slope", "below_bottom_knot": "slope",
+                "spline_ends": "not-a-knot"}
+        if "field_knots_a" in self.hyper:
+            if ends.keys() <= self.hyper.keys():
+                return self
+            return type(self)(**{**ends, **self.hyper})
+        nominal, knots = choose_field_knots(tables)
+        return type(self)(**{**self.hyper, "field_nominal_a": nominal,
+                             "field_knots_a": knots, **ends})
 
     def _basis(self, k: Kinematics) -> np.ndarray:
         """The curve's weights at ``k``'s field readings. The regressor and its current

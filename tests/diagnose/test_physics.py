@@ -202,10 +202,10 @@ def test_the_saturation_knee_sits_at_the_median_hoist_current_and_bends_the_pull
     tables = [SimpleNamespace(columns={"hoist1_a": i1, "hoist2_a": i1 + 10.0}),
               SimpleNamespace(columns={"hoist1_a": -i1, "hoist2_a": -i1})]
     term = TERMS["current_saturation"]()
-    term.search_hyper(None, tables)
+    assert term.for_data(tables) is term
     assert term.h("knee_a") == np.median([110, 210, 310, 410, 100, 200, 300, 400])
     given = TERMS["current_saturation"](knee_a=333.0)
-    given.search_hyper(None, tables)
+    given.for_data(tables)
     assert given.h("knee_a") == 333.0
 
     k = _kin(200)
