@@ -333,11 +333,17 @@ def forward_select(dataset: DataSet, library: list[str], sigma0: np.ndarray,
         if not todo:
             break
         cur = ev(current)
+
+        def judge(c: str, now: list[str] = current, cur: Evaluation = cur,
+                  n_tried: int = len(todo)) -> tuple[Evaluation, CandidateScore]:
+            """``c`` added to the current model, scored against it (``_reference``)."""
+            cand = ev([*now, c], cur)
+            ref = _reference(cfg, cand, cur, lambda: ev(now, folds=True))
+            return cand, compare(dataset, ref, cand, c, n_tried, cfg)
+
         scores = []
         for c in todo:
-            cand = ev([*current, c], cur)
-            ref = _reference(cfg, cand, cur, lambda now=current: ev(now, folds=True))
-            score = compare(dataset, ref, cand, c, len(todo), cfg)
+            cand, score = judge(c)
             if score.why.startswith(UNSTABLE_WHY) and not cand.cross_validated \
                     and n_verified >= 2:
                 # Identified on the trials alone, it did not fit the passes: the trials
@@ -347,9 +353,7 @@ def forward_select(dataset: DataSet, library: list[str], sigma0: np.ndarray,
                 # from 29.7 x the residual to 91 % less (docs/diagnosis.md).
                 on_folds.add(c)
                 fixed_hyper.pop(c, None)
-                cand = ev([*current, c], cur)
-                ref = _reference(cfg, cand, cur, lambda now=current: ev(now, folds=True))
-                score = compare(dataset, ref, cand, c, len(todo), cfg)
+                cand, score = judge(c)
             scores.append(score)
         scores.sort(key=lambda s: -s.gain if math.isfinite(s.gain) else math.inf)
         sig = [s for s in scores if s.significant]
