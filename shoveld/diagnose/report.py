@@ -55,6 +55,14 @@ def added(candidate: str, found: list[str]) -> bool:
     return all(n in found for n in candidate.split("+"))
 
 
+def candidate_verdict(c: dict[str, Any], found: list[str]) -> str:
+    """A ranked candidate's verdict in words: added (and on what), or why not."""
+    if added(c["name"], found):
+        return ("added on the payload (the residual cannot see it)"
+                if c.get("witness") == "payload" else "added")
+    return str(c["why"] or "significant")
+
+
 def cause(name: str) -> str:
     cls = TERMS[name]
     return str(getattr(cls, "cause", "") or cls.description)
@@ -117,6 +125,7 @@ def as_json(d: Diagnosis) -> dict[str, Any]:
                      "decisive_gain": (cfg.decisive_gain if math.isfinite(cfg.decisive_gain)
                                        else None),
                      "same_data": cfg.same_data,
+                     "blind_z": cfg.blind_z if math.isfinite(cfg.blind_z) else None,
                      "test": "per-pass held-out loss differences, one-sided t, Bonferroni "
                              "over the candidates of a step"}
     out["timing_s"] = {k: round(v, 3) for k, v in d.timing.items()}
@@ -302,7 +311,8 @@ def write_report(d: Diagnosis, out_dir: str | Path) -> Path:
               "|---|---|---|---|---|"]
     pairs = js["steps"][0]["pairs"] if js["steps"] else []
     for c in js["ranked"] + pairs:
-        verdict = "**added**" if added(c["name"], d.found) else (c["why"] or "significant")
+        verdict = (f"**{candidate_verdict(c, d.found)}**" if added(c["name"], d.found)
+                   else candidate_verdict(c, d.found))
         score = 100 * (c["score"] or 0)
         removed = f"{score:+.1f} %" if abs(score) < 1000 else "unstable"
         lines.append(f"| `{c['name']}` | {removed} | "
@@ -335,6 +345,11 @@ def write_report(d: Diagnosis, out_dir: str | Path) -> Path:
                  if math.isfinite(d.config.decisive_gain) else "")
               + ("; a candidate identified with the verified passes is judged against the "
                  "current model identified on the same passes" if d.config.same_data else "")
+              + (f". A term the residual cannot see (the rope's weight, which the dipper's "
+                 "mass absorbs) is added on the payload alone when each of its parameters "
+                 f"stands {d.config.blind_z:g} standard errors from zero on its physical side "
+                 "and the verified passes' payload errors fall"
+                 if math.isfinite(d.config.blind_z) else "")
               + ". The search repeats until none qualifies."]
     (out / "report.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
     return out / "report.md"
