@@ -47,6 +47,11 @@ UNSTABLE = 1.0
 """A candidate whose held-out residual is more than (1 + this) times the current model's
 has not fitted; it is reported as unstable, not ranked by its score."""
 UNSTABLE_WHY = "unstable fit"
+NOT_PHYSICAL = "not physical"
+"""A candidate whose own parameter lies more than ``OUTSIDE_SE`` standard errors outside
+its physical bounds (``ExtensionTerm.bounds``: a negative rope mass) stands in for
+another cause; it is reported so, not ranked nor paired."""
+OUTSIDE_SE = 3.0
 
 
 @dataclass(frozen=True)
@@ -198,10 +203,13 @@ def compare(dataset: DataSet, cur: Evaluation, cand: Evaluation, name: str, n_tr
                 ) if len(e0) else 0.0
     worse = _rms(e1) - _rms(e0) if len(e0) else 0.0
     why = ""
+    outside = _outside_bounds(cand, name)
     if math.isfinite(gain) and gain < -UNSTABLE:
         # The candidate's own fit is off (its parameters wander on data that does not
         # excite them): not a finding either way, and its score says nothing.
         why = f"{UNSTABLE_WHY} (held-out residual {1 - gain:.1f} x the current model's)"
+    elif outside:
+        why = f"{NOT_PHYSICAL} ({outside}: it stands in for another cause)"
     elif not (t > t_crit):
         why = f"not significant (t {t:.2f} <= {t_crit:.2f})"
     elif not (gain >= cfg.min_gain):
@@ -226,6 +234,26 @@ def compare(dataset: DataSet, cur: Evaluation, cand: Evaluation, name: str, n_tr
     return CandidateScore(name, gain, t, t_crit, n, _rms(e1),
                           float(e1.mean()) if len(e1) else math.nan, ratio, not why, why,
                           hyper, cand.cross_validated, witness)
+
+
+def _outside_bounds(cand: Evaluation, name: str) -> str:
+    """The first own parameter of ``name``'s terms that lies more than ``OUTSIDE_SE``
+    standard errors outside its physical bounds, in words; "" if none. The rope's term
+    fitted where a slope or a saturation is the cause gave -600 to -184 kg/m, 6-13
+    standard errors below zero (docs/diagnosis.md)."""
+    for term_name in name.split("+"):
+        bounds = getattr(TERMS.get(term_name), "bounds", {})
+        if not bounds:
+            continue
+        fitted = cand.final or cand.folds[0]
+        for p, (lo, hi) in bounds.items():
+            if p not in fitted.names:
+                continue
+            i = fitted.names.index(p)
+            v, se = float(fitted.values[i]), float(fitted.stderr[i])
+            if v < lo - OUTSIDE_SE * se or v > hi + OUTSIDE_SE * se:
+                return f"{p} {v:.4g} +- {se:.2g}, outside [{lo:g}, {hi:g}]"
+    return ""
 
 
 def _payload_witness(cand: Evaluation, name: str, gain: float, e0: np.ndarray,
@@ -282,7 +310,8 @@ def _pairs_to_try(scores: list[CandidateScore], cfg: SelectionConfig
     took half the residual and pushed the payload 525 kg high (docs/diagnosis.md)."""
     if cfg.pair_among <= 0:
         return []
-    usable = [s for s in scores if math.isfinite(s.gain) and not s.why.startswith(UNSTABLE_WHY)]
+    usable = [s for s in scores if math.isfinite(s.gain)
+              and not s.why.startswith((UNSTABLE_WHY, NOT_PHYSICAL))]
     pool = [s for s in usable if s.gain >= cfg.min_gain][:cfg.pair_among]
     pairs = [(a, b) for k, a in enumerate(pool) for b in pool[k + 1:]]
     for a in usable:

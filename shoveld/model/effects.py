@@ -543,6 +543,7 @@ class LoadDependentFriction(ExtensionTerm):
     cause = ("friction in the shipper shaft and the saddle block grows with the load "
              "in the dipper")
     signature = "payload_x_direction"
+    bounds = {"fc3_kg": (0.0, math.inf), "fc4_kg": (0.0, math.inf)}  # friction only resists
 
     def columns(self, k: Kinematics) -> np.ndarray:
         z = np.zeros_like(k.d)
@@ -708,6 +709,7 @@ class BoomSuspensionSpring(ExtensionTerm):
     signature = "hoist_current"
     defaults = {"ref_a": 500.0}
     static_params = ("K_H_sag",)
+    bounds = {"K_H_sag": (0.0, math.inf)}  # the boom point drops under the pull, never rises
 
     def columns(self, k: Kinematics) -> np.ndarray:
         g_th, g_d = _unit_hoist_dboom(k)

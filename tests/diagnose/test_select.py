@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from shoveld.diagnose.select import SelectionConfig, _pair, compare
+from shoveld.diagnose.select import SelectionConfig, _pair, _pairs_to_try, compare
 
 N = 16
 SIGN = np.where(np.arange(N) % 2 == 0, 1.0, -1.0)
@@ -248,7 +248,7 @@ def test_a_term_the_residual_cannot_see_is_named_on_the_payload_with_its_physics
     assert rope.significant and rope.witness == "payload" and rope.why == "", rope
     assert rope.as_dict()["witness"] == "payload"
     negative = score("hoist_rope_mass", 0.995, 200.0, -110.0, 6.0)
-    assert not negative.significant and negative.why.startswith("not significant")
+    assert not negative.significant and negative.why.startswith("not physical")
     vague = score("hoist_rope_mass", 0.995, 200.0, 110.0, 30.0)
     assert not vague.significant
     no_pay = score("hoist_rope_mass", 0.995, 440.0, 110.0, 6.0)
@@ -262,3 +262,26 @@ def test_a_term_the_residual_cannot_see_is_named_on_the_payload_with_its_physics
     off = compare(DATA, cur, fitted(model(0.995, 200.0), 110.0, 6.0), "hoist_rope_mass", 8,
                   SelectionConfig(blind_z=math.inf))
     assert not off.significant
+
+
+def test_a_term_whose_physics_comes_out_impossible_is_neither_named_nor_paired() -> None:
+    """A negative rope mass says the rope's term stands in for another cause (a slope, a
+    saturation): however much of the residual it takes, it is reported as not physical,
+    and the pairs are drawn from the candidates without it (on slope + friction it took
+    the third place of the pool from the friction)."""
+    cur = model(1.0, 400.0)
+    cfg = SelectionConfig()
+    fake = compare(DATA, cur, fitted(model(0.7, 150.0), -313.0, 30.0), "hoist_rope_mass", 8,
+                   cfg)
+    assert not fake.significant and fake.why.startswith("not physical"), fake
+    assert "rope_kg_m -313" in fake.why
+    # within three standard errors of its bound it is judged as usual
+    near = compare(DATA, cur, fitted(model(0.7, 150.0), -60.0, 30.0), "hoist_rope_mass", 8,
+                   cfg)
+    assert near.significant, near
+    a = compare(DATA, cur, model(0.8, 450.0), "a", 8, cfg)
+    b = compare(DATA, cur, model(0.88, 450.0), "b", 8, cfg)
+    c = compare(DATA, cur, model(0.92, 450.0), "c", 8, cfg)
+    pairs = _pairs_to_try(sorted([a, fake, b, c], key=lambda s: -s.gain), cfg)
+    assert {frozenset((x.name, y.name)) for x, y in pairs} == {
+        frozenset(("a", "b")), frozenset(("a", "c")), frozenset(("b", "c"))}
