@@ -311,8 +311,9 @@ def write_report(d: Diagnosis, out_dir: str | Path) -> Path:
               "|---|---|---|---|---|"]
     pairs = js["steps"][0]["pairs"] if js["steps"] else []
     for c in js["ranked"] + pairs:
-        verdict = (f"**{candidate_verdict(c, d.found)}**" if added(c["name"], d.found)
-                   else candidate_verdict(c, d.found))
+        verdict = candidate_verdict(c, d.found)
+        if added(c["name"], d.found):
+            verdict = f"**{verdict}**"
         score = 100 * (c["score"] or 0)
         removed = f"{score:+.1f} %" if abs(score) < 1000 else "unstable"
         lines.append(f"| `{c['name']}` | {removed} | "

@@ -203,12 +203,11 @@ def compare(dataset: DataSet, cur: Evaluation, cand: Evaluation, name: str, n_tr
                 ) if len(e0) else 0.0
     worse = _rms(e1) - _rms(e0) if len(e0) else 0.0
     why = ""
-    outside = _outside_bounds(cand, name)
     if math.isfinite(gain) and gain < -UNSTABLE:
         # The candidate's own fit is off (its parameters wander on data that does not
         # excite them): not a finding either way, and its score says nothing.
         why = f"{UNSTABLE_WHY} (held-out residual {1 - gain:.1f} x the current model's)"
-    elif outside:
+    elif outside := _outside_bounds(cand, name):
         why = f"{NOT_PHYSICAL} ({outside}: it stands in for another cause)"
     elif not (t > t_crit):
         why = f"not significant (t {t:.2f} <= {t_crit:.2f})"
@@ -236,21 +235,26 @@ def compare(dataset: DataSet, cur: Evaluation, cand: Evaluation, name: str, n_tr
                           hyper, cand.cross_validated, witness)
 
 
+def _estimate(cand: Evaluation, param: str) -> tuple[float, float] | None:
+    """``param``'s identified value and standard error in ``cand``'s fit (the final one,
+    else the first fold's); None where the fit has no such parameter."""
+    fitted = cand.final or cand.folds[0]
+    if param not in fitted.names:
+        return None
+    i = fitted.names.index(param)
+    return float(fitted.values[i]), float(fitted.stderr[i])
+
+
 def _outside_bounds(cand: Evaluation, name: str) -> str:
     """The first own parameter of ``name``'s terms that lies more than ``OUTSIDE_SE``
     standard errors outside its physical bounds, in words; "" if none. The rope's term
     fitted where a slope or a saturation is the cause gave -600 to -184 kg/m, 6-13
     standard errors below zero (docs/diagnosis.md)."""
     for term_name in name.split("+"):
-        bounds = getattr(TERMS.get(term_name), "bounds", {})
-        if not bounds:
-            continue
-        fitted = cand.final or cand.folds[0]
-        for p, (lo, hi) in bounds.items():
-            if p not in fitted.names:
+        for p, (lo, hi) in getattr(TERMS.get(term_name), "bounds", {}).items():
+            if (est := _estimate(cand, p)) is None:
                 continue
-            i = fitted.names.index(p)
-            v, se = float(fitted.values[i]), float(fitted.stderr[i])
+            v, se = est
             if v < lo - OUTSIDE_SE * se or v > hi + OUTSIDE_SE * se:
                 return f"{p} {v:.4g} +- {se:.2g}, outside [{lo:g}, {hi:g}]"
     return ""
@@ -269,11 +273,11 @@ def _payload_witness(cand: Evaluation, name: str, gain: float, e0: np.ndarray,
     if (term is None or not getattr(term, "residual_blind", False)
             or not abs(gain) < cfg.min_gain or len(e0) <= 2):
         return False
-    fitted = cand.final or cand.folds[0]
     bounds = getattr(term, "bounds", {})
     for p in term.params:
-        i = fitted.names.index(p)
-        v, se = float(fitted.values[i]), float(fitted.stderr[i])
+        if (est := _estimate(cand, p)) is None:
+            return False
+        v, se = est
         lo, hi = bounds.get(p, (-math.inf, math.inf))
         if not (lo <= v <= hi and se > 0.0 and abs(v) >= cfg.blind_z * se):
             return False
