@@ -58,8 +58,10 @@ def added(candidate: str, found: list[str]) -> bool:
 def candidate_verdict(c: dict[str, Any], found: list[str]) -> str:
     """A ranked candidate's verdict in words: added (and on what), or why not."""
     if added(c["name"], found):
-        return ("added on the payload (the residual cannot see it)"
-                if c.get("witness") == "payload" else "added")
+        return {"payload": "added on the payload (the residual cannot see it)",
+                "agreement": "added: the residual cannot see it, its value holds beside the "
+                             "earlier models and the payload improves"
+                }.get(c.get("witness", ""), "added")
     return str(c["why"] or "significant")
 
 
@@ -126,6 +128,7 @@ def as_json(d: Diagnosis) -> dict[str, Any]:
                                        else None),
                      "same_data": cfg.same_data,
                      "blind_z": cfg.blind_z if math.isfinite(cfg.blind_z) else None,
+                     "agree_se": cfg.agree_se,
                      "test": "per-pass held-out loss differences, one-sided t, Bonferroni "
                              "over the candidates of a step"}
     out["timing_s"] = {k: round(v, 3) for k, v in d.timing.items()}
@@ -350,6 +353,10 @@ def write_report(d: Diagnosis, out_dir: str | Path) -> Path:
                  "mass absorbs) is added on the payload alone when each of its parameters "
                  f"stands {d.config.blind_z:g} standard errors from zero on its physical side "
                  "and the verified passes' payload errors fall"
+                 + (", or their RMS falls and its value agrees, within "
+                    f"{d.config.agree_se:g} standard errors, with its value beside each "
+                    "model of the earlier steps (a term standing in for another cause "
+                    "moves as the model around it changes)" if d.config.agree_se > 0 else "")
                  if math.isfinite(d.config.blind_z) else "")
               + ". The search repeats until none qualifies."]
     (out / "report.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
