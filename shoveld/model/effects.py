@@ -469,6 +469,8 @@ class PayloadCogOffset(ExtensionTerm):
              "hangs on a longer lever than the model assumes")
     signature = "handle_angle"
     static_params = ("cog_fwd", "cog_up")
+    # the load lies in the dipper's bowl: in front of the bail pin and below it
+    bounds = {"cog_fwd": (0.0, math.inf), "cog_up": (-math.inf, 0.0)}
 
     def columns(self, k: Kinematics) -> np.ndarray:
         z = np.zeros_like(k.d)

@@ -268,8 +268,9 @@ def test_a_term_the_residual_cannot_see_is_named_on_the_payload_with_its_physics
 
 
 def test_a_term_whose_physics_comes_out_impossible_is_neither_named_nor_paired() -> None:
-    """A negative rope mass says the rope's term stands in for another cause (a slope, a
-    saturation): however much of the residual it takes, it is reported as not physical,
+    """A negative rope mass, or a load's centre of gravity above the bail, says the term
+    stands in for another cause (a slope, a saturation, the rope's weight): however much
+    of the residual it takes, it is reported as not physical,
     and the pairs are drawn from the candidates without it (on slope + friction it took
     the third place of the pool from the friction)."""
     cur = model(1.0, 400.0)
@@ -282,6 +283,17 @@ def test_a_term_whose_physics_comes_out_impossible_is_neither_named_nor_paired()
     near = compare(DATA, cur, fitted(model(0.7, 150.0), -60.0, 30.0), "hoist_rope_mass", 8,
                    cfg)
     assert near.significant, near
+    # the load's centre of gravity lies in the dipper's bowl, in front of and below the
+    # bail: fitted above it, the term stands in for another cause (the rope's weight)
+    def cog(fwd: float, up: float) -> Any:
+        m = model(0.7, 150.0)
+        m.final = SimpleNamespace(names=["Md", "cog_fwd", "cog_up"],
+                                  values=np.array([55_000.0, fwd, up]),
+                                  stderr=np.array([300.0, 0.15, 0.1]))
+        return compare(DATA, cur, m, "payload_cog_offset", 8, cfg)
+    above = cog(-0.42, 0.68)
+    assert not above.significant and "cog_up 0.68" in above.why, above
+    assert cog(0.7, -0.19).significant
     a = compare(DATA, cur, model(0.8, 450.0), "a", 8, cfg)
     b = compare(DATA, cur, model(0.88, 450.0), "b", 8, cfg)
     c = compare(DATA, cur, model(0.92, 450.0), "c", 8, cfg)
