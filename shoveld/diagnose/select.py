@@ -277,27 +277,31 @@ def _outside_bounds(cand: Evaluation, name: str) -> str:
 def _blind_witness(cand: Evaluation, name: str, gain: float, e0: np.ndarray,
                    e1: np.ndarray, cfg: SelectionConfig, before: Sequence[Evaluation] = ()
                    ) -> str:
-    """What names ``name``, a term the residual cannot see, that failed the residual or
-    the payload tests: "payload", "agreement", or "" (not named).
+    """What names ``name``, a term the residual cannot see (``residual_blind``, or beside
+    a term that masks it, ``masked_by``), that failed the residual or the payload tests:
+    "payload", "agreement", or "" (not named).
 
     Each own parameter must stand ``blind_z`` standard errors from zero inside the term's
     physical bounds, and the held-out residual must not be worse by ``min_gain``. Then
-    either its share of the residual is under ``min_gain`` either way and the verified
-    passes' payload errors fall significantly (``payload_alpha``: "payload"), or their
+    either its share of the residual is under ``min_gain`` either way (any share, beside
+    a term that masks it) and the verified passes' payload errors fall significantly
+    (``payload_alpha``: "payload"), or their
     RMS falls and the same value was found beside each model of the earlier steps where
     it was physical (``_agrees``: "agreement"). Fitted to another cause the rope's weight
     came out negative (as a slope or a saturation), within 5 standard errors of zero but
     once, and moved with the model around it (docs/diagnosis.md)."""
     term = TERMS.get(name)
-    if (term is None or not getattr(term, "residual_blind", False) or len(e0) <= 2
-            or not gain > -cfg.min_gain):
+    masked = term is not None and any(
+        e in getattr(term, "masked_by", ()) for e in getattr(cand, "effects", ()))
+    if (term is None or not (getattr(term, "residual_blind", False) or masked)
+            or len(e0) <= 2 or not gain > -cfg.min_gain):
         return ""
     now = {p: est for p in term.params if (est := _estimate(cand, p)) is not None}
     bounds = getattr(term, "bounds", {})
     if len(now) < len(term.params) or not all(
             _clear(est, bounds.get(p), cfg.blind_z) for p, est in now.items()):
         return ""
-    if abs(gain) < cfg.min_gain and _pays(e0, e1, cfg.payload_alpha)[0]:
+    if (abs(gain) < cfg.min_gain or masked) and _pays(e0, e1, cfg.payload_alpha)[0]:
         return "payload"
     if _rms(e1) < _rms(e0) and _agrees(name, now, before, cfg):
         return "agreement"

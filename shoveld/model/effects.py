@@ -66,6 +66,11 @@ class ExtensionTerm(Term):
     weight grows with the reach as the dipper's does), so the held-out residual barely
     changes either way and the payload is its only witness. The selection may name such
     a term on the payload alone (``SelectionConfig.blind_z``)."""
+    masked_by: ClassVar[tuple[str, ...]] = ()
+    """Terms beside which this one's residual signature is nearly the other's: once one of
+    them is in the model the residual cannot judge this term, and the selection may name
+    it on the payload as a ``residual_blind`` term, whatever share of the residual it
+    takes (``SelectionConfig.blind_z``)."""
     bounds: ClassVar[dict[str, tuple[float, float]]] = {}
     """Physically admissible range of an own parameter (a mass per metre is not negative):
     a value outside it says the term stands in for another cause."""
@@ -546,6 +551,10 @@ class LoadDependentFriction(ExtensionTerm):
              "in the dipper")
     signature = "payload_x_direction"
     bounds = {"fc3_kg": (0.0, math.inf), "fc4_kg": (0.0, math.inf)}  # friction only resists
+    # In a lift the rates keep their sign, so the load times their sign is a function of
+    # the load, as the saturation is of the hoist current: beside it the residual sees
+    # this term only where the rates reverse (docs/diagnosis.md).
+    masked_by = ("current_saturation",)
 
     def columns(self, k: Kinematics) -> np.ndarray:
         z = np.zeros_like(k.d)

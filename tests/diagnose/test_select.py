@@ -350,3 +350,34 @@ def test_a_blind_term_whose_value_holds_beside_the_earlier_models_is_named() -> 
     assert not score(112.0, 4.5, (120.0, 8.0), loss=1.03).significant
     off = SelectionConfig(agree_se=0.0)
     assert not score(112.0, 4.5, (120.0, 8.0), c=off).significant
+
+
+def test_the_friction_beside_the_saturation_is_judged_on_the_payload() -> None:
+    """In a lift the rates keep their sign, so friction growing with the load is, to the
+    residual, a function of the load, as the saturation is of the hoist current: beside
+    the saturation the friction took 1-7 % of the residual without significance while the
+    payload error fell by 40-55 %. Beside the term that masks it (``masked_by``) it is
+    named on the payload when both coefficients stand clear of zero on the side friction
+    has; not without the saturation in the model, nor on a value within its errors or
+    impossible, nor where the payload does not improve."""
+    cur = model(1.0, 400.0)
+    cfg = SelectionConfig()
+    # 5 % of the residual on average, too spread to be significant
+    spread = np.where(np.arange(N) % 2 == 0, 0.8, 1.1)
+
+    def score(fc3: float, fc4: float, effects: list[str], err_kg: float = 200.0) -> Any:
+        m = per_pass(spread, err_kg)
+        m.final = SimpleNamespace(names=["Md", "fc3_kg", "fc4_kg"],
+                                  values=np.array([55_000.0, fc3, fc4]),
+                                  stderr=np.array([300.0, 0.12, 0.03]))
+        m.effects = effects
+        return compare(DATA, cur, m, "load_dependent_friction", 8, cfg)
+
+    sat = ["current_saturation", "load_dependent_friction"]
+    named = score(0.8, 0.6, sat)
+    assert named.significant and named.witness == "payload", named
+    alone = score(0.8, 0.6, ["load_dependent_friction"])
+    assert not alone.significant and alone.why.startswith("not significant"), alone
+    assert not score(0.3, 0.6, sat).significant                  # 2.5 se: within errors
+    assert score(-0.8, 0.6, sat).why.startswith("not physical")
+    assert not score(0.8, 0.6, sat, err_kg=430.0).significant
