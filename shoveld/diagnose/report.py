@@ -357,6 +357,9 @@ def write_report(d: Diagnosis, out_dir: str | Path) -> Path:
                     f"{d.config.agree_se:g} standard errors, with its value beside each "
                     "model of the earlier steps (a term standing in for another cause "
                     "moves as the model around it changes)" if d.config.agree_se > 0 else "")
+                 + "; a term masked by one in the model (the friction growing with the load "
+                   "beside the saturation: in a lift the two look alike to the residual) is "
+                   "judged the same way, on the payload whatever its share of the residual"
                  if math.isfinite(d.config.blind_z) else "")
               + ". The search repeats until none qualifies."]
     (out / "report.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
