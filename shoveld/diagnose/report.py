@@ -336,6 +336,9 @@ def write_report(d: Diagnosis, out_dir: str | Path) -> Path:
             lines.append(f"| {term} (hyper) | {h} | | |")
     for k, v in js["extended"]["derived"].items():
         lines.append(f"| {k} | {v:.4g} | | |")
+    # The masking the terms declare (``ExtensionTerm.masked_by``), in words.
+    masked = [f"{TERMS[n].description} beside {TERMS[m].description}"
+              for n, t in TERMS.items() for m in getattr(t, "masked_by", ())]
     lines += ["", "## Method", "",
               "Each candidate is added on its own to the current model, identified by the same "
               "calibration as the base model (on the calibration trials; with cross-validation "
@@ -357,9 +360,9 @@ def write_report(d: Diagnosis, out_dir: str | Path) -> Path:
                     f"{d.config.agree_se:g} standard errors, with its value beside each "
                     "model of the earlier steps (a term standing in for another cause "
                     "moves as the model around it changes)" if d.config.agree_se > 0 else "")
-                 + "; a term masked by one in the model (the friction growing with the load "
-                   "beside the saturation: in a lift the two look alike to the residual) is "
-                   "judged the same way, on the payload whatever its share of the residual"
+                 + (f"; a term masked by one in the model ({'; '.join(masked)}: the two "
+                    "look alike to the residual) is judged the same way, on the payload "
+                    "whatever its share of the residual" if masked else "")
                  if math.isfinite(d.config.blind_z) else "")
               + ". The search repeats until none qualifies."]
     (out / "report.md").write_text("\n".join(lines) + "\n", encoding="utf-8")

@@ -285,16 +285,16 @@ def _blind_witness(cand: Evaluation, name: str, gain: float, e0: np.ndarray,
     physical bounds, and the held-out residual must not be worse by ``min_gain``. Then
     either its share of the residual is under ``min_gain`` either way (any share, beside
     a term that masks it) and the verified passes' payload errors fall significantly
-    (``payload_alpha``: "payload"), or their
-    RMS falls and the same value was found beside each model of the earlier steps where
-    it was physical (``_agrees``: "agreement"). Fitted to another cause the rope's weight
-    came out negative (as a slope or a saturation), within 5 standard errors of zero but
-    once, and moved with the model around it (docs/diagnosis.md)."""
+    (``payload_alpha``: "payload"), or their RMS falls and the same value was found
+    beside each model of the earlier steps where it was physical (``_agrees``:
+    "agreement"). Fitted to another cause the rope's weight came out negative (as a
+    slope or a saturation), within 5 standard errors of zero but once, and moved with the
+    model around it (docs/diagnosis.md)."""
     term = TERMS.get(name)
-    masked = term is not None and any(
-        e in getattr(term, "masked_by", ()) for e in getattr(cand, "effects", ()))
-    if (term is None or not (getattr(term, "residual_blind", False) or masked)
-            or len(e0) <= 2 or not gain > -cfg.min_gain):
+    if term is None or len(e0) <= 2 or not gain > -cfg.min_gain:
+        return ""
+    masked = any(e in getattr(term, "masked_by", ()) for e in getattr(cand, "effects", ()))
+    if not (getattr(term, "residual_blind", False) or masked):
         return ""
     now = {p: est for p in term.params if (est := _estimate(cand, p)) is not None}
     bounds = getattr(term, "bounds", {})
@@ -345,6 +345,11 @@ PAYLOAD_ONLY = "does not pay on the payload"
 FOLDS = "@folds"
 """Marks a cache key whose model was identified on the folds' verified passes although
 the trials alone would do (``SelectionConfig.same_data``)."""
+
+
+def _cache_key(effects: list[str], folds: bool) -> tuple[str, ...]:
+    """The key of the model with ``effects`` in ``forward_select``'s cache."""
+    return (*effects, FOLDS) if folds else tuple(effects)
 
 
 def _reference(cfg: SelectionConfig, cand: Evaluation, plain: Evaluation,
@@ -441,7 +446,7 @@ def forward_select(dataset: DataSet, library: list[str], sigma0: np.ndarray,
     def ev(effects: list[str], parent: Evaluation | None = None, folds: bool = False
            ) -> Evaluation:
         folds = folds or any(e in on_folds for e in effects)
-        key = (*effects, FOLDS) if folds else tuple(effects)
+        key = _cache_key(effects, folds)
         if key not in cache:
             hyper = {e: dict(fixed_hyper[e]) for e in effects if e in fixed_hyper}
             fold_hyper = ([dict(f.hyper) for f in parent.folds]
@@ -462,9 +467,14 @@ def forward_select(dataset: DataSet, library: list[str], sigma0: np.ndarray,
     def fitted_before(c: str) -> list[Evaluation]:
         """``c``'s fits beside the models of the earlier steps, as judged there (on the
         folds where it was refitted so): from the cache, no new fit."""
-        keys = [((*st.model, c, FOLDS), (*st.model, c)) for st in steps]
-        return [next(cache[k] for k in ks if k in cache) for ks in keys
-                if any(k in cache for k in ks)]
+        found = []
+        for st in steps:
+            for folds in (True, False):
+                if (key := _cache_key([*st.model, c], folds)) in cache:
+                    found.append(cache[key])
+                    break
+        return found
+
     tried = list(library)
     while len(current) < cfg.max_effects:
         todo = [c for c in tried if c not in current]
