@@ -297,8 +297,10 @@ class SwingCentrifugal(ExtensionTerm):
                 break
 
 
-ARM_STREAM = ("handle_deg", "crowd_m", "swing_deg")
-"""Signals of the saddle-block arm-geometry sensor (MTi and laser)."""
+MTI_STREAM = ("handle_deg", "swing_deg")
+"""Signals of the MTi: the handle's angle and the house's swing."""
+LASER_STREAM = ("crowd_m",)
+"""Signal of the laser: the handle's extension."""
 DRIVE_STREAM = ("hoist1_a", "hoist2_a", "hoist_field_a", "crowd_a", "crowd_field_a", "swing_a",
                 "swing_field_a", "boom_deg", "roll_deg", "pitch_deg")
 """Signals of the analog logger (Hall-effect current sensors and inclinometers)."""
@@ -344,74 +346,111 @@ class StreamDelay:
         return replace(s, **dict(zip(self.names, v0, strict=True)))
 
 
+class StreamDelays:
+    """Several delay lines in turn (one per late group of fields)."""
+
+    def __init__(self, lines: list[StreamDelay]) -> None:
+        self.lines = lines
+
+    def __call__(self, s: Any) -> Any:
+        for line in self.lines:
+            s = line(s)
+        return s
+
+
 @register_term
 class SensorTimeSkew(ExtensionTerm):
-    """One sensor stream is late against the other.
+    """One sensor stream is late against the others.
 
-    The arm-geometry sensor on the saddle block and the analog logger of currents
-    and inclinometers sample at different moments and with different filters. With
-    ``delay_s`` > 0 the arm readings are that much older than the currents; the
-    transform re-aligns the streams by delaying the leading one by whole samples
-    (causal, so the live engine does the same with a delay line). The delay is found
-    by a search over whole samples, coarse to fine.
+    Three devices sample the machine, each with its own buffering: the MTi on the
+    saddle block (handle angle, swing), the laser beside it (crowd extension) and the
+    analog logger of currents and inclinometers. ``delay_s`` is how much older the
+    MTi's readings are than the currents (negative: the currents are the older);
+    ``crowd_lag_s`` is how much older the laser's are than the MTi's, 0 when the two
+    arm devices report in step (one arm-geometry stream). The transform re-aligns the
+    streams by delaying the leading ones by whole samples (causal, so the live engine
+    does the same with delay lines). Both are found by a search over whole samples.
     """
 
     name = "sensor_time_skew"
     params = ()
     units = ()
     description = "arm sensor and current logger out of step"
-    cause = ("the arm-position sensor and the current logger are out of step in time "
+    cause = ("the arm-position sensors and the current logger are out of step in time "
              "(one sensor stream is delayed)")
     signature = "time_shift"
-    defaults = {"delay_s": 0.0}
-    search = {"delay_s": (-0.3, 0.3)}
+    defaults = {"delay_s": 0.0, "crowd_lag_s": 0.0}
+    search = {"delay_s": (-0.3, 0.3), "crowd_lag_s": (-0.3, 0.3)}
 
     def columns(self, k: Kinematics) -> np.ndarray:
         return np.zeros((len(k), 2, 0))
 
-    def searched(self) -> list[tuple[str, str, float, float]]:
+    def lateness(self) -> dict[tuple[str, ...], float]:
+        """Each device's signals and how much older its readings are than the currents."""
         d = self.h("delay_s")
-        what = ("arm-geometry stream late against the currents" if d >= 0
-                else "current stream late against the arm geometry")
-        # the search walks whole samples: half a sample is its resolution
-        return [(what, "s", abs(d), 0.01)]
+        return {DRIVE_STREAM: 0.0, MTI_STREAM: d, LASER_STREAM: d + self.h("crowd_lag_s")}
 
-    def _late(self) -> tuple[tuple[str, ...], float]:
-        d = self.h("delay_s")
-        return (DRIVE_STREAM, d) if d >= 0 else (ARM_STREAM, -d)
+    def searched(self) -> list[tuple[str, str, float, float]]:
+        late = self.lateness()
+        # the search walks whole samples: half a sample is its resolution
+        out = []
+        for names, what in ((MTI_STREAM, "MTi stream (handle angle, swing)"),
+                            (LASER_STREAM, "laser stream (crowd)")):
+            d = late[names]
+            out.append((f"{what} late against the currents" if d >= 0 else
+                        f"current stream late against the {what.split(' ')[0]}", "s",
+                        abs(d), 0.01))
+        return out
+
+    def _delays(self) -> list[tuple[tuple[str, ...], float]]:
+        """(signals, delay) that bring every stream to the latest one's time."""
+        late = self.lateness()
+        last = max(late.values())
+        return [(names, last - d) for names, d in late.items() if last - d > 0.0]
 
     def transform(self, cols: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        names, delay = self._late()
-        if delay == 0.0:
+        delays = self._delays()
+        if not delays:
             return cols
         out = dict(cols)
-        _delay_columns(np.asarray(cols["time_s"]), out, names, delay)
+        t = np.asarray(cols["time_s"])
+        for names, delay in delays:
+            _delay_columns(t, out, names, delay)
         return out
 
     def stream(self) -> Callable[[Any], Any] | None:
-        """The live version of ``transform``: a causal delay line on samples."""
-        names, delay = self._late()
-        return StreamDelay(names, delay) if delay > 0 else None
+        """The live version of ``transform``: causal delay lines on samples."""
+        delays = self._delays()
+        return StreamDelays([StreamDelay(n, d) for n, d in delays]) if delays else None
 
     def search_hyper(self, cal: Any, tables: list[Any]) -> None:
-        """Delay in whole samples: start where the residual points (to first order a
-        delay tau leaves tau x dI/dt in the hoist current), then walk sample by sample
-        downhill on the fit's residual."""
+        """Delays in whole samples: start where the residual points (to first order a
+        delay tau leaves tau x dI/dt in the hoist current), walk the arm's delay sample
+        by sample downhill on the fit's residual, then both delays together (the laser's
+        own, and the MTi's with the laser's held), in steps of 4, 2 and 1 samples."""
         import copy
 
-        if "delay_s" in self.given:
+        if "delay_s" in self.given and "crowd_lag_s" in self.given:
             return
-        self.given.add("delay_s")
+        free = {n for n in ("delay_s", "crowd_lag_s") if n not in self.given}
+        self.given |= free
         dt = 1.0 / float(tables[0].sample_rate_hz)
         lo, hi = self.search["delay_s"]
         kmax = int(min(-lo, hi) / dt)
-        tried: dict[int, float] = {}
+        k0 = int(round(self.h("delay_s") / dt))
+        j0 = int(round(self.h("crowd_lag_s") / dt))
+        tried: dict[tuple[int, int], float] = {}
         scale: list[np.ndarray] = []
         first: list[Any] = []
 
-        def objective(k: int) -> float:
-            if k not in tried:
-                self.hyper["delay_s"] = k * dt
+        def ok(k: int, j: int) -> bool:
+            return (abs(k) <= kmax and abs(k + j) <= kmax
+                    and ("delay_s" in free or k == k0) and ("crowd_lag_s" in free or j == j0))
+
+        def objective(kj: tuple[int, int]) -> float:
+            if kj not in tried:
+                self.hyper["delay_s"] = kj[0] * dt
+                self.hyper["crowd_lag_s"] = kj[1] * dt
                 inner = copy.copy(cal)
                 # the thesis form is a tenth of the cost and has its minimum at the same
                 # delay: the search only needs where the residual is least
@@ -421,20 +460,29 @@ class SensorTimeSkew(ExtensionTerm):
                 if not scale:
                     scale.append(rms)
                     first.append(inner)
-                tried[k] = float(np.sum((rms / scale[0]) ** 2))
-            return tried[k]
+                tried[kj] = float(np.sum((rms / scale[0]) ** 2))
+            return tried[kj]
 
-        objective(0)
-        k = int(np.clip(round(self._implied_delay(first[0]) / dt), -kmax, kmax))
-        step = 1
-        while True:
-            here = objective(k)
-            better = [j for j in (k - step, k + step) if abs(j) <= kmax and objective(j) < here]
-            if not better:
-                break
-            k = min(better, key=objective)
+        def walk(here: tuple[int, int], moves: list[tuple[int, int]]) -> tuple[int, int]:
+            while True:
+                nxt = [(here[0] + a, here[1] + b) for a, b in moves]
+                better = [kj for kj in nxt if ok(*kj) and objective(kj) < objective(here)]
+                if not better:
+                    return here
+                here = min(better, key=objective)
+
+        here = (k0, j0)
+        objective(here)
+        if "delay_s" in free:
+            k = int(np.clip(round(self._implied_delay(first[0]) / dt), -kmax, kmax))
+            here = walk((k, j0), [(-1, 0), (1, 0)])
+        for step in (4, 2, 1):
+            # the laser alone, the MTi alone, both arm devices together
+            here = walk(here, [(0, -step), (0, step), (-step, step), (step, -step),
+                               (-step, 0), (step, 0)])
         best = min(tried, key=tried.__getitem__)
-        self.hyper["delay_s"] = best * dt
+        self.hyper["delay_s"] = best[0] * dt
+        self.hyper["crowd_lag_s"] = best[1] * dt
 
     @staticmethod
     def _implied_delay(cal: Any) -> float:

@@ -33,6 +33,8 @@ def test_diagnose_json_and_report(files: dict[str, Path], capsys: pytest.Capture
     js = json.loads(capsys.readouterr().out)
     assert js["found"] == ["sensor_time_skew"]
     assert abs(js["extended"]["hyper"]["sensor_time_skew"]["delay_s"] - 0.14) <= 0.021
+    # the whole arm stream is late (MTi and laser together): no lag between the two
+    assert abs(js["extended"]["hyper"]["sensor_time_skew"]["crowd_lag_s"]) <= 0.021
     for key in ("found", "ranked", "base", "extended", "passes", "residuals_against"):
         assert key in js
     for tag in ("base", "extended"):
@@ -60,6 +62,7 @@ def test_calibrate_and_estimate_take_the_extended_model(
     p = load_params(out)
     assert p.terms[-1] == "sensor_time_skew"
     assert abs(p.hyper["sensor_time_skew"]["delay_s"] - 0.14) <= 0.021
+    assert abs(p.hyper["sensor_time_skew"]["crowd_lag_s"]) <= 0.021
     capsys.readouterr()
     assert main(["estimate", str(files["ops"]), "--params", str(out), "--json"]) == 0
     passes = [json.loads(line) for line in capsys.readouterr().out.splitlines()]

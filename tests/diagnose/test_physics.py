@@ -172,6 +172,33 @@ def test_stream_delay_matches_the_offline_transform() -> None:
         assert np.array_equal(np.isfinite(got), np.isfinite(want))
 
 
+def test_one_late_device_is_realigned_alone_offline_and_live() -> None:
+    """The MTi 0.1 s late, the laser on time: the currents and the crowd are delayed to
+    the MTi's time, the MTi's own readings are left as they are."""
+    res = simulate_cycles(1, seed=3, payload_range=(10000.0, 10000.0), truck_target_kg=None)
+    cols0 = dict(res.table.columns)
+    term = TERMS["sensor_time_skew"](delay_s=0.1, crowd_lag_s=-0.1)
+    cols = term.transform(cols0)
+    t = np.asarray(cols0["time_s"])
+    n = int(round(0.1 / float(np.median(np.diff(t)))))
+    for name in ("handle_deg", "swing_deg"):
+        assert np.array_equal(cols[name], cols0[name])
+    for name in ("crowd_m", DRIVE_STREAM[0]):
+        assert np.allclose(cols[name][n:], np.asarray(cols0[name])[:-n], equal_nan=True)
+        assert np.isnan(cols[name][: n // 2]).all()
+    live = term.stream()
+    assert live is not None
+    out = [live(s) for s in samples_from_table(res.table)]
+    for name in ("handle_deg", "crowd_m", DRIVE_STREAM[0]):
+        got = np.array([getattr(s, name) for s in out])
+        assert np.array_equal(np.isfinite(got), np.isfinite(cols[name]))
+        both = np.isfinite(got)
+        assert np.allclose(got[both], cols[name][both])
+    assert [f["what"] for f in term.findings([], np.zeros(0), np.zeros((0, 0)))] == [
+        "MTi stream (handle angle, swing) late against the currents",
+        "laser stream (crowd) late against the currents"]
+
+
 def test_params_file_records_terms_and_hyper(tmp_path) -> None:
     model = Model.from_names(["sensor_time_skew", "swing_centrifugal"],
                              {"sensor_time_skew": {"delay_s": 0.08},
