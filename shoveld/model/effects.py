@@ -437,6 +437,8 @@ class SensorTimeSkew(ExtensionTerm):
         dt = 1.0 / float(tables[0].sample_rate_hz)
         lo, hi = self.search["delay_s"]
         kmax = int(min(-lo, hi) / dt)
+        lo, hi = self.search["crowd_lag_s"]
+        jmax = int(min(-lo, hi) / dt)
         k0 = int(round(self.h("delay_s") / dt))
         j0 = int(round(self.h("crowd_lag_s") / dt))
         tried: dict[tuple[int, int], float] = {}
@@ -444,7 +446,8 @@ class SensorTimeSkew(ExtensionTerm):
         first: list[Any] = []
 
         def ok(k: int, j: int) -> bool:
-            return (abs(k) <= kmax and abs(k + j) <= kmax
+            # each device within the delay's bounds of the currents, and of the other
+            return (abs(k) <= kmax and abs(k + j) <= kmax and abs(j) <= jmax
                     and ("delay_s" in free or k == k0) and ("crowd_lag_s" in free or j == j0))
 
         def objective(kj: tuple[int, int]) -> float:
