@@ -293,7 +293,7 @@ def _blind_witness(cand: Evaluation, name: str, gain: float, e0: np.ndarray,
     term = TERMS.get(name)
     if term is None or len(e0) <= 2 or not gain > -cfg.min_gain:
         return ""
-    masked = any(e in getattr(term, "masked_by", ()) for e in getattr(cand, "effects", ()))
+    masked = any(e in getattr(term, "masked_by", ()) for e in cand.effects)
     if not (getattr(term, "residual_blind", False) or masked):
         return ""
     now = {p: est for p in term.params if (est := _estimate(cand, p)) is not None}

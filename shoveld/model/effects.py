@@ -393,14 +393,10 @@ class SensorTimeSkew(ExtensionTerm):
     def searched(self) -> list[tuple[str, str, float, float]]:
         late = self.lateness()
         # the search walks whole samples: half a sample is its resolution
-        out = []
-        for names, what in ((MTI_STREAM, "MTi stream (handle angle, swing)"),
-                            (LASER_STREAM, "laser stream (crowd)")):
-            d = late[names]
-            out.append((f"{what} late against the currents" if d >= 0 else
-                        f"current stream late against the {what.split(' ')[0]}", "s",
-                        abs(d), 0.01))
-        return out
+        return [(f"{device} stream ({signals}) late against the currents" if late[names] >= 0
+                 else f"current stream late against the {device}", "s", abs(late[names]), 0.01)
+                for names, device, signals in ((MTI_STREAM, "MTi", "handle angle, swing"),
+                                               (LASER_STREAM, "laser", "crowd"))]
 
     def _delays(self) -> list[tuple[tuple[str, ...], float]]:
         """(signals, delay) that bring every stream to the latest one's time."""

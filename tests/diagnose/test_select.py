@@ -35,7 +35,8 @@ def model(loss: float, payload_err_kg: float, spread: float = 0.02) -> Any:
                                  payload_kg=10_000.0 + SIGN[i] * payload_err_kg
                                  * (1.0 + 0.1 * rng.standard_normal()))
               for i in range(N)}
-    return SimpleNamespace(scores=scores, hyper=lambda: {}, cross_validated=False)
+    return SimpleNamespace(scores=scores, hyper=lambda: {}, cross_validated=False,
+                           effects=[])
 
 
 DATA = SimpleNamespace(passes=[SimpleNamespace(index=i, verified=True, payload_kg=10_000.0)
