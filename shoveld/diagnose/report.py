@@ -60,7 +60,9 @@ def candidate_verdict(c: dict[str, Any], found: list[str]) -> str:
     if added(c["name"], found):
         return {"payload": "added on the payload (the residual cannot see it)",
                 "agreement": "added: the residual cannot see it, its value holds beside the "
-                             "earlier models and the payload improves"
+                             "earlier models and the payload improves",
+                "prediction": "added: its value is the one its physics predicts, and the "
+                              "payload improves"
                 }.get(c.get("witness", ""), "added")
     return str(c["why"] or "significant")
 

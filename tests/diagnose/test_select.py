@@ -382,3 +382,102 @@ def test_the_friction_beside_the_saturation_is_judged_on_the_payload() -> None:
     assert not score(0.3, 0.6, sat).significant                  # 2.5 se: within errors
     assert score(-0.8, 0.6, sat).why.startswith("not physical")
     assert not score(0.8, 0.6, sat, err_kg=430.0).significant
+
+
+def test_a_term_acting_per_kilogram_of_load_is_tested_where_the_load_is() -> None:
+    """Friction growing with the load removes residual on the heavy passes only; the
+    light ones add their noise to a plain mean. Weighted by the load squared (what each
+    pass can show of a per-kilogram term) the same gains are significant; a term not
+    acting per kilogram, or the weighting off, keeps the plain test."""
+    rng = np.random.default_rng(11)
+    loads = np.linspace(2_000.0, 34_000.0, N)
+    rng.shuffle(loads)
+    data = SimpleNamespace(passes=[SimpleNamespace(index=i, verified=True, payload_kg=m)
+                                   for i, m in enumerate(loads)])
+    share = 0.25 * (loads / loads.max()) ** 2   # its share of each pass's loss
+    noise = 1.0 + 0.12 * rng.standard_normal(N)
+    cur = per_pass(noise * (1.0 + share), 300.0)
+    cand = per_pass(noise * np.exp(0.12 * rng.standard_normal(N)), 100.0)
+    for ev, err in ((cur, 300.0), (cand, 100.0)):
+        for i, sc in ev.scores.items():
+            sc.payload_kg = loads[i] + SIGN[i] * err
+    cand.final = SimpleNamespace(names=["fc3_kg", "fc4_kg"], values=np.array([0.8, 0.6]),
+                                 stderr=np.array([0.1, 0.05]))
+    weighted = compare(data, cur, cand, "load_dependent_friction", 8, SelectionConfig())
+    plain = compare(data, cur, cand, "load_dependent_friction", 8,
+                    SelectionConfig(load_weighted=False))
+    other = compare(data, cur, cand, "x", 8, SelectionConfig())
+    assert weighted.significant and weighted.t > weighted.t_crit, weighted
+    assert not plain.significant and plain.why.startswith("not significant"), plain
+    assert other.t == plain.t and weighted.t > 1.5 * plain.t
+
+
+def test_the_t_through_the_origin_with_equal_weights_is_the_one_sample_t() -> None:
+    from scipy import stats
+
+    from shoveld.diagnose.select import _t_through_origin
+
+    d = np.random.default_rng(3).normal(0.1, 0.2, 20)
+    assert math.isclose(_t_through_origin(d, np.ones(20)),
+                        float(stats.ttest_1samp(d, 0.0).statistic), rel_tol=1e-12)
+
+
+
+def test_a_term_whose_value_is_the_one_its_physics_predicts_is_named_on_the_payload(
+        ) -> None:
+    """On a slope the deck's pitch tilts the boom point by exactly the pitch, so the
+    slope's K_H_pitch comes out near K_H (kappa = 1), a value no stand-in has reason to
+    give. Beside another term it took 3-7 % of the residual without significance while
+    the payload error fell twentyfold: with kappa within a factor of two of one and
+    clear of zero, it is named where the payload RMS falls (as a decisive share would
+    be); not with kappa far from one, nor within its errors of zero, nor where the
+    payload does not improve."""
+    cur = model(1.0, 400.0)
+    spread = np.where(np.arange(N) % 2 == 0, 0.85, 1.08)   # 3.5 %, not significant
+
+    def score(kappa: float, se: float, err_kg: float = 100.0) -> Any:
+        m = per_pass(spread, err_kg)
+        m.final = SimpleNamespace(names=["K_H", "K_H_pitch"],
+                                  values=np.array([1700.0, 1700.0 * kappa]),
+                                  stderr=np.array([5.0, se]))
+        m.effects = ["swing_centrifugal", "ground_slope"]
+        return compare(DATA, cur, m, "ground_slope", 8, SelectionConfig())
+
+    named = score(1.2, 40.0)
+    assert named.significant and named.witness == "prediction", named
+    assert "physics predicts" in candidate_verdict(named.as_dict(), ["ground_slope"])
+    for why_not in (score(0.2, 40.0), score(3.0, 40.0),   # not the predicted value
+                    score(1.2, 500.0),                      # within its errors of zero
+                    score(1.2, 40.0, err_kg=420.0)):        # the payload does not improve
+        assert not why_not.significant and why_not.why.startswith("not significant"), why_not
+
+
+def test_a_confirmed_cause_is_named_before_a_larger_share(monkeypatch: Any) -> None:
+    """Beside the swing's term the boom's spring took 12 % of the residual and the slope
+    7 %, both significant; the slope's kappa came out 1.2, the payload 71 kg against the
+    spring's 122. The cause its physics confirms is named first; without the prediction
+    the larger share is."""
+    import shoveld.diagnose.select as select
+
+    def slope(kappa: float) -> Any:
+        m = model(0.93, 70.0)
+        m.final = SimpleNamespace(names=["K_H", "K_H_pitch"],
+                                  values=np.array([1700.0, 1700.0 * kappa]),
+                                  stderr=np.array([5.0, 40.0]))
+        return m
+
+    for kappa, first in ((1.2, "ground_slope"), (0.1, "spring")):
+        made = {(): model(1.0, 300.0), ("spring",): model(0.88, 120.0),
+                ("ground_slope",): slope(kappa), ("ground_slope", "spring"): model(0.85, 60.0),
+                ("spring", "ground_slope"): model(0.85, 60.0)}
+
+        def evaluate(dataset: Any, effects: list[str], *args: Any, made: Any = made,
+                     **kwargs: Any) -> Any:
+            return made[tuple(effects)]
+
+        monkeypatch.setattr(select, "evaluate", evaluate)
+        sel = select.forward_select(DATA, ["spring", "ground_slope"], np.ones(2), [],
+                                    SelectionConfig(max_effects=1))
+        assert sel.found == [first], sel.steps[0].candidates
+        sig = {c.name: c.significant for c in sel.steps[0].candidates}
+        assert sig == {"spring": True, "ground_slope": True}
