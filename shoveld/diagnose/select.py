@@ -113,8 +113,8 @@ class SelectionConfig:
     """A term acting per kilogram of load (``ExtensionTerm.per_load``) is tested on the
     passes weighted by their load squared, the share of its signal each can carry
     (``_load_weights``), instead of all alike: the load-dependent friction beside the
-    swing's term took 3-4 % of the residual, nearly all of it on the heavy passes, and
-    the light ones' noise held its plain t at 1.4-1.8. Over nine sets of pairs the true
+    swing's term took 1-4 % of the residual, most of it on the heaviest passes, and the
+    light ones' noise held its plain t at 0.7-1.6. Over nine sets of pairs the true
     friction's t went from a median 4.2 to 7.3, an absent one's from 0.5 to 0.4
     (docs/diagnosis.md, fifteenth session)."""
     payload_tolerance: float = math.inf
@@ -435,7 +435,11 @@ def _pairs_to_try(scores: list[CandidateScore], cfg: SelectionConfig
                   ) -> list[tuple[CandidateScore, CandidateScore]]:
     """The pairs ``_pair`` fits: among the best ``cfg.pair_among`` candidates by their share
     of the residual (each at least ``min_gain``, whatever test it failed alone), and each
-    decisive candidate that failed only the payload test beside every other one.
+    decisive or confirmed (``_confirmed``) candidate that failed only the payload test
+    beside every other one; beside a confirmed one also those that came out not physical
+    alone (a term standing in for another cause may be physical beside it: the rope's
+    weight came out negative alone on four slope + rope machines, where the slope alone
+    raised the payload RMS).
 
     Two effects at once can hide each other: the friction and the slope each took 8-16 %
     of the residual with a pass-to-pass spread too wide for significance alone, and
@@ -448,9 +452,12 @@ def _pairs_to_try(scores: list[CandidateScore], cfg: SelectionConfig
               and not s.why.startswith((UNSTABLE_WHY, NOT_PHYSICAL))]
     pool = [s for s in usable if s.gain >= cfg.min_gain][:cfg.pair_among]
     pairs = [(a, b) for k, a in enumerate(pool) for b in pool[k + 1:]]
+    stable = [s for s in scores if math.isfinite(s.gain) and not s.why.startswith(UNSTABLE_WHY)]
     for a in usable:
-        if a.why.startswith(PAYLOAD_ONLY) and a.gain >= cfg.decisive_gain:
-            pairs += [(a, b) for b in usable if b is not a
+        if a.why.startswith(PAYLOAD_ONLY) and (a.gain >= cfg.decisive_gain or a.confirmed):
+            # beside a confirmed cause also those not physical alone: they may have stood
+            # in for it
+            pairs += [(a, b) for b in (stable if a.confirmed else usable) if b is not a
                       and not any({a.name, b.name} == {x.name, y.name} for x, y in pairs)]
     return pairs
 
@@ -464,8 +471,9 @@ def _pair(dataset: DataSet, cur: Evaluation, scores: list[CandidateScore],
     the model show the gain. The pair must be significant and pay on the payload, with
     the Bonferroni correction counting the pairs beside the single candidates. Each term
     of a pair must also earn its place beside the other, by the residual tests a next
-    step would apply (significant, and at least ``min_gain`` of what the other leaves):
-    else a term that fails alone would bring in a passenger."""
+    step would apply (significant, and at least ``min_gain`` of what the other leaves, or
+    named beside it by its witness, ``_blind_witness``): else a term that fails alone
+    would bring in a passenger."""
     pairs = _pairs_to_try(scores, cfg)
     n_tried = n_single + len(pairs)
     best: CandidateScore | None = None
@@ -479,7 +487,9 @@ def _pair(dataset: DataSet, cur: Evaluation, scores: list[CandidateScore],
         for one, other in ((a.name, b.name), (b.name, a.name)):
             alone = _reference(cfg, both, fit([other]), lambda o=other: fit([o], True))
             inc = compare(dataset, alone, both, one, n_tried, cfg)
-            if s.significant and not (inc.t > inc.t_crit and inc.gain >= cfg.min_gain):
+            adds = (inc.t > inc.t_crit and inc.gain >= cfg.min_gain) or (
+                inc.significant and inc.witness != "residual")
+            if s.significant and not adds:
                 s.significant = False
                 s.why = (f"{one} adds {100 * inc.gain:.1f} % (t {inc.t:.2f}) to {other}: "
                          f"not significant beside it")

@@ -481,3 +481,41 @@ def test_a_confirmed_cause_is_named_before_a_larger_share(monkeypatch: Any) -> N
         assert sel.found == [first], sel.steps[0].candidates
         sig = {c.name: c.significant for c in sel.steps[0].candidates}
         assert sig == {"spring": True, "ground_slope": True}
+
+
+def test_beside_a_confirmed_cause_a_term_impossible_alone_is_tried() -> None:
+    """Slope + rope: the slope alone (kappa 1.2, confirmed) raised the payload error, the
+    rope alone came out negative (standing in for the slope). A confirmed candidate that
+    fails only the payload test is tried beside every other, those not physical alone
+    too; the pair pays and the rope, blind to the residual, is named beside the slope on
+    the payload. Without the confirmation (kappa 0.1) the pair is not tried."""
+    def fitted_as(m: Any, **values: tuple[float, float]) -> Any:
+        m.final = SimpleNamespace(names=["K_H", *values],
+                                  values=np.array([1700.0, *(v for v, _ in values.values())]),
+                                  stderr=np.array([5.0, *(se for _, se in values.values())]))
+        return m
+
+    cfg = SelectionConfig()
+    for kappa, tried in ((1.2, True), (0.1, False)):
+        cur = model(1.0, 300.0)
+        models = {("ground_slope",): fitted_as(model(0.92, 450.0),
+                                               K_H_pitch=(1700.0 * kappa, 40.0)),
+                  ("hoist_rope_mass",): fitted_as(model(1.0, 250.0), rope_kg_m=(-200.0, 30.0)),
+                  ("x",): model(0.99, 300.0),
+                  ("ground_slope", "x"): fitted_as(model(0.92, 450.0),
+                                                   K_H_pitch=(1700.0 * kappa, 40.0)),
+                  ("ground_slope", "hoist_rope_mass"): fitted_as(
+                      model(0.915, 60.0), K_H_pitch=(1700.0 * kappa, 40.0),
+                      rope_kg_m=(120.0, 10.0))}
+        for k, m in models.items():
+            m.effects = list(k)
+        singles = [compare(DATA, cur, models[(n,)], n, 3, cfg)
+                   for n in ("ground_slope", "hoist_rope_mass", "x")]
+        assert singles[0].why.startswith("does not pay on the payload"), singles[0]
+        assert singles[0].confirmed is tried
+        assert singles[1].why.startswith("not physical"), singles[1]
+        best, pairs = _pair(DATA, cur, singles, cfg, 3,
+                            lambda names, made=models: made[tuple(sorted(names))])
+        names = [p.name for p in pairs]
+        assert ("ground_slope+hoist_rope_mass" in names) is tried, names
+        assert (best is not None and best.name == "ground_slope+hoist_rope_mass") is tried
