@@ -325,8 +325,8 @@ def _blind_witness(cand: Evaluation, name: str, gain: float, e0: np.ndarray,
     """What names ``name``, a term the residual cannot see (``residual_blind``, or beside
     a term that masks it, ``masked_by``, or whose value came out as its physics predicts,
     ``_confirmed``), that failed the residual or the payload tests: "payload",
-    "prediction" (confirmed, and the payload errors fall), "agreement", or "" (not
-    named).
+    "prediction" (confirmed, and the verified passes' payload RMS falls), "agreement", or
+    "" (not named).
 
     Each own parameter must stand ``blind_z`` standard errors from zero inside the term's
     physical bounds, and the held-out residual must not be worse by ``min_gain``. Then
