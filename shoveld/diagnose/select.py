@@ -283,15 +283,15 @@ def compare(dataset: DataSet, cur: Evaluation, cand: Evaluation, name: str, n_tr
         why = (f"does not pay (held-out payload RMS {worse:+.0f} kg, more than "
                f"{cfg.payload_tolerance:g} x its calibration uncertainty {cal:.0f} kg)")
     witness = "residual"
+    confirmed = name in TERMS and _confirmed(cand, TERMS[name], cfg)
     if why.startswith(("not significant", "too small", PAYLOAD_ONLY)) and (
-            blind := _blind_witness(cand, name, gain, e0, e1, cfg, before)):
+            blind := _blind_witness(cand, name, gain, e0, e1, cfg, before, confirmed)):
         why, witness = "", blind
     hyper = ({n: dict(cand.hyper().get(n, {})) for n in name.split("+")} if "+" in name
              else dict(cand.hyper().get(name, {})))
     return CandidateScore(name, gain, t, t_crit, n, _rms(e1),
                           float(e1.mean()) if len(e1) else math.nan, ratio, not why, why,
-                          hyper, cand.cross_validated, witness,
-                          name in TERMS and _confirmed(cand, TERMS[name], cfg))
+                          hyper, cand.cross_validated, witness, confirmed)
 
 
 def _estimate(cand: Evaluation, param: str) -> tuple[float, float] | None:
@@ -320,11 +320,11 @@ def _outside_bounds(cand: Evaluation, name: str) -> str:
 
 
 def _blind_witness(cand: Evaluation, name: str, gain: float, e0: np.ndarray,
-                   e1: np.ndarray, cfg: SelectionConfig, before: Sequence[Evaluation] = ()
-                   ) -> str:
+                   e1: np.ndarray, cfg: SelectionConfig, before: Sequence[Evaluation] = (),
+                   confirmed: bool = False) -> str:
     """What names ``name``, a term the residual cannot see (``residual_blind``, or beside
-    a term that masks it, ``masked_by``, or whose value came out as its physics predicts,
-    ``_confirmed``), that failed the residual or the payload tests: "payload",
+    a term that masks it, ``masked_by``, or ``confirmed``: its value came out as its
+    physics predicts, ``_confirmed``), that failed the residual or the payload tests: "payload",
     "prediction" (confirmed, and the verified passes' payload RMS falls), "agreement", or
     "" (not named).
 
@@ -340,7 +340,6 @@ def _blind_witness(cand: Evaluation, name: str, gain: float, e0: np.ndarray,
     term = TERMS.get(name)
     if term is None or len(e0) <= 2 or not gain > -cfg.min_gain:
         return ""
-    confirmed = _confirmed(cand, term, cfg)
     masked = confirmed or any(e in getattr(term, "masked_by", ()) for e in cand.effects)
     if not (getattr(term, "residual_blind", False) or masked):
         return ""
@@ -370,8 +369,8 @@ def _confirmed(cand: Evaluation, term: Any, cfg: SelectionConfig) -> bool:
     for p, (ref, lo, hi) in pred.items():
         if (est := _estimate(cand, p)) is None or (base := _estimate(cand, ref)) is None:
             return False
-        (v, se), b = est, base[0]
-        if not (b > 0.0 and lo <= v / b <= hi and se > 0.0 and abs(v) >= cfg.blind_z * se):
+        v, b = est[0], base[0]
+        if not (b > 0.0 and lo <= v / b <= hi and _clear(est, None, cfg.blind_z)):
             return False
     return True
 
@@ -448,11 +447,10 @@ def _pairs_to_try(scores: list[CandidateScore], cfg: SelectionConfig
     took half the residual and pushed the payload 525 kg high (docs/diagnosis.md)."""
     if cfg.pair_among <= 0:
         return []
-    usable = [s for s in scores if math.isfinite(s.gain)
-              and not s.why.startswith((UNSTABLE_WHY, NOT_PHYSICAL))]
+    stable = [s for s in scores if math.isfinite(s.gain) and not s.why.startswith(UNSTABLE_WHY)]
+    usable = [s for s in stable if not s.why.startswith(NOT_PHYSICAL)]
     pool = [s for s in usable if s.gain >= cfg.min_gain][:cfg.pair_among]
     pairs = [(a, b) for k, a in enumerate(pool) for b in pool[k + 1:]]
-    stable = [s for s in scores if math.isfinite(s.gain) and not s.why.startswith(UNSTABLE_WHY)]
     for a in usable:
         if a.why.startswith(PAYLOAD_ONLY) and (a.gain >= cfg.decisive_gain or a.confirmed):
             # beside a confirmed cause also those not physical alone: they may have stood
