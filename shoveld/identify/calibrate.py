@@ -284,6 +284,10 @@ class Calibrator:
     output_fit_: output_error.OutputFit | None = field(default=None, init=False)
     """The output-error fit behind ``params_`` (its angle sensitivities, noise model)."""
     stages_: list[StageResult] = field(default_factory=list, init=False)
+    row_residuals_: np.ndarray | None = field(default=None, init=False)
+    """(N, 2): the equation-error fit's residual per used sample (the rows of ``files_``
+    with ``use``, in order), in the equations' units; what a search over a delay sums
+    block by block for its standard error (``SensorTimeSkew``)."""
 
     def prepare(self, tables: list[SignalsTable]) -> list[FileData]:
         return [exclusion_masks(t, self.model, self.exclusion, self.window_s, self.polyorder)
@@ -415,6 +419,7 @@ class Calibrator:
             cov[np.ix_(idx, idx)] = cov_i
             res = (w_all @ p) - y_all
             sigma = np.sqrt(np.mean(res**2, axis=0))
+        self.row_residuals_ = res
         return p, cov, sigma
 
     def _stage(self, name: str, w: np.ndarray, y: np.ndarray, idx: list[int],

@@ -391,6 +391,14 @@ class SensorTimeSkew(ExtensionTerm):
     signature = "time_shift"
     defaults = {"delay_s": 0.0, "crowd_lag_s": 0.0}
     search = {"delay_s": (-0.3, 0.3), "crowd_lag_s": (-0.3, 0.3)}
+    model_error_s: ClassVar[dict[str, float]] = {"mti": 0.0115, "laser": 0.0174}
+    """Each device's delay error that the trials' own scatter does not show (a type B
+    uncertainty, added in quadrature to the search's standard error): the base model's
+    misfit of a machine pulls the delay the same way in every block of its trials.
+    Measured on the detection matrix's 53 time-skew cases (realistic machines): the
+    value that makes the RMS of error over standard deviation one there
+    (``bench/delay_uncertainty.py --cases bench``; checked on new machines with
+    ``--cases fresh``, docs/diagnosis.md)."""
 
     def columns(self, k: Kinematics) -> np.ndarray:
         return np.zeros((len(k), 2, 0))
@@ -402,11 +410,16 @@ class SensorTimeSkew(ExtensionTerm):
 
     def searched(self) -> list[tuple[str, str, float, float]]:
         late = self.lateness()
-        # the search walks whole samples: half a sample is its resolution
+        # each device's standard error as the search found it (``_delay_errors``; a
+        # delay given, or one whose objective has no curvature, has only its resolution)
+        # and the model's error beside it
         return [(f"{device} stream ({signals}) late against the currents" if late[names] >= 0
-                 else f"current stream late against the {device}", "s", abs(late[names]), 0.01)
-                for names, device, signals in ((MTI_STREAM, "MTi", "handle angle, swing"),
-                                               (LASER_STREAM, "laser", "crowd"))]
+                 else f"current stream late against the {device}", "s", abs(late[names]),
+                 math.hypot(float(self.hyper.get(f"{key}_late_std_s", 0.01)),
+                            self.model_error_s[key]))
+                for names, device, key, signals in (
+                    (MTI_STREAM, "MTi", "mti", "handle angle, swing"),
+                    (LASER_STREAM, "laser", "laser", "crowd"))]
 
     def _delays(self) -> list[tuple[tuple[str, ...], float]]:
         """(signals, delay) that bring every stream to the latest one's time."""
@@ -448,6 +461,7 @@ class SensorTimeSkew(ExtensionTerm):
         k0 = int(round(self.h("delay_s") / dt))
         j0 = int(round(self.h("crowd_lag_s") / dt))
         tried: dict[tuple[int, int], float] = {}
+        parts: dict[tuple[int, int], dict[int, float]] = {}
         scale: list[np.ndarray] = []
         first: list[Any] = []
 
@@ -470,6 +484,7 @@ class SensorTimeSkew(ExtensionTerm):
                     scale.append(rms)
                     first.append(inner)
                 tried[kj] = float(np.sum((rms / scale[0]) ** 2))
+                parts[kj] = _block_shares(inner, scale[0])
             return tried[kj]
 
         def walk(here: tuple[int, int], moves: list[tuple[int, int]]) -> tuple[int, int]:
@@ -490,8 +505,13 @@ class SensorTimeSkew(ExtensionTerm):
             here = walk(here, [(0, -step), (0, step), (-step, step), (step, -step),
                                (-step, 0), (step, 0)])
         best = min(tried, key=tried.__getitem__)
+        std = _delay_errors(best, objective, parts, ok, free)
         self.hyper["delay_s"] = best[0] * dt
         self.hyper["crowd_lag_s"] = best[1] * dt
+        # kept with the delays (the params file's [hyper], the later steps' fixed values)
+        for key, s in zip(("mti", "laser"), std, strict=True):
+            self.hyper[f"{key}_late_std_s"] = (math.sqrt(s**2 + 1.0 / 12.0) * dt
+                                               if math.isfinite(s) else 0.5 * dt)
 
     @staticmethod
     def _implied_delay(cal: Any) -> float:
@@ -510,6 +530,74 @@ class SensorTimeSkew(ExtensionTerm):
             num += float(np.sum(r[ok] * di[ok]))
             den += float(np.sum(di[ok] ** 2))
         return num / den if den > 0 else 0.0
+
+
+DELAY_BLOCK_S = 4.0
+"""Blocks of the trials over which the delay search's scores are summed (as the
+output-error fit's covariance sums its scores: ``output_error.BLOCK_S``)."""
+
+
+def _block_shares(cal: Any, scale: np.ndarray) -> dict[int, float]:
+    """The search's objective (each equation's mean squared residual in units of its
+    first value) split over blocks of ``BLOCK_S`` seconds of each file: its shares sum to
+    the objective. Blocks are counted from each file's first sample, so the same block
+    holds the same stretch of the trial whatever the delay."""
+    r = cal.row_residuals_
+    files = [f for f in cal.files_ if f.use.any()]
+    ids = np.concatenate([i * 1_000_000 + np.floor((f.kin.t[f.use] - f.kin.t[0]) / DELAY_BLOCK_S)
+                          for i, f in enumerate(files)]).astype(np.int64)
+    per_row = np.sum(r**2 / scale[None, :] ** 2, axis=1) / len(r)
+    keys, inv = np.unique(ids, return_inverse=True)
+    sums = np.bincount(inv, weights=per_row)
+    return dict(zip(keys.tolist(), sums.tolist(), strict=True))
+
+
+def _delay_errors(best: tuple[int, int], objective: Callable[[tuple[int, int]], float],
+                  parts: dict[tuple[int, int], dict[int, float]],
+                  ok: Callable[[int, int], bool], free: set[str]) -> tuple[float, float]:
+    """Standard errors, in samples, of the MTi's and the laser's lateness found by the
+    search: the sandwich of an M-estimator over blocks of the trials.
+
+    The delays minimise a sum over blocks of S_b(k, j), the parameters refitted at each
+    delay (a profile). A block's change of S_b across the best point is its score (with
+    the parameters profiled out, exactly the efficient score), and the scores' spread
+    between blocks - the misfit of the causes not modelled, of the machine, the noise,
+    each block on its own - is what moves the delay; the curvature of the sum turns it
+    into the delay's: V = H^-1 B H^-1 with B the blocks' centred scores' covariance.
+    Central differences at one sample (the profile is evaluated there anyway by the
+    walk's last step). NaN where a neighbour lies outside the bounds or the curvature is
+    not positive (the data do not hold the delay)."""
+    k, j = best
+    dims = [d for d, name in (((1, 0), "delay_s"), ((0, 1), "crowd_lag_s")) if name in free]
+    if not dims:
+        return math.nan, math.nan
+    pts = [(k + a * s, j + b * s) for a, b in dims for s in (1, -1)]
+    if len(dims) == 2:
+        pts += [(k + 1, j - 1), (k - 1, j + 1)]
+    if not all(ok(*p) for p in pts):
+        return math.nan, math.nan
+    s0 = objective(best)
+    h_diag = [objective((k + a, j + b)) + objective((k - a, j - b)) - 2 * s0 for a, b in dims]
+    h = np.diag(h_diag)
+    if len(dims) == 2:
+        anti = objective((k + 1, j - 1)) + objective((k - 1, j + 1)) - 2 * s0
+        h[0, 1] = h[1, 0] = 0.5 * (h_diag[0] + h_diag[1] - anti)
+    blocks = sorted(set().union(*(parts[p] for p in pts[:2 * len(dims)])))
+    g = np.array([[0.5 * (parts[(k + a, j + b)].get(i, 0.0)
+                          - parts[(k - a, j - b)].get(i, 0.0)) for a, b in dims]
+                  for i in blocks])
+    n = len(g)
+    if n < 3 or np.any(np.linalg.eigvalsh(h) <= 0):
+        return math.nan, math.nan
+    g = g - g.mean(axis=0)
+    hinv = np.linalg.inv(h)
+    v = hinv @ (g.T @ g * n / (n - 1)) @ hinv
+    # the lateness of each device: the MTi's is delay_s, the laser's delay_s + crowd_lag_s
+    full = np.zeros((2, 2))
+    idx = [0 if d == (1, 0) else 1 for d in dims]
+    full[np.ix_(idx, idx)] = v
+    return (math.sqrt(full[0, 0]) if "delay_s" in free else math.nan,
+            math.sqrt(max(0.0, full[0, 0] + full[1, 1] + 2 * full[0, 1])))
 
 
 @register_term

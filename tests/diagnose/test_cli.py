@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import pytest
@@ -35,6 +36,15 @@ def test_diagnose_json_and_report(files: dict[str, Path], capsys: pytest.Capture
     assert abs(js["extended"]["hyper"]["sensor_time_skew"]["delay_s"] - 0.14) <= 0.021
     # the whole arm stream is late (MTi and laser together): no lag between the two
     assert abs(js["extended"]["hyper"]["sensor_time_skew"]["crowd_lag_s"]) <= 0.021
+    # each device's lateness with its uncertainty: the search's standard error (more
+    # than the grid's rounding alone) and the model's error beside it, covering the truth
+    hyper = js["extended"]["hyper"]["sensor_time_skew"]
+    for dev in ("mti", "laser"):
+        assert 0.02 / math.sqrt(12) < hyper[f"{dev}_late_std_s"] < 0.05
+    late = {f["what"].split()[0]: f for f in js["physical"]["sensor_time_skew"]}
+    for dev in ("MTi", "laser"):
+        assert late[dev]["std"] > 0.0115
+        assert abs(late[dev]["value"] - 0.14) <= 2 * late[dev]["std"]
     for key in ("found", "ranked", "base", "extended", "passes", "residuals_against"):
         assert key in js
     for tag in ("base", "extended"):

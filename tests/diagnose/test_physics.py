@@ -20,6 +20,7 @@ from shoveld.model import G, Kinematics, Model
 from shoveld.model.effects import (
     DRIVE_STREAM,
     EFFECT_TERMS,
+    _delay_errors,
     _unit_hoist,
     _unit_hoist_dboom,
 )
@@ -197,6 +198,41 @@ def test_one_late_device_is_realigned_alone_offline_and_live() -> None:
     assert [f["what"] for f in term.findings([], np.zeros(0), np.zeros((0, 0)))] == [
         "MTi stream (handle angle, swing) late against the currents",
         "laser stream (crowd) late against the currents"]
+
+
+def test_the_delays_standard_errors_are_the_blocks_scatter_through_the_curvature() -> None:
+    """Blocks whose own best delays scatter: block b's share of the objective is
+    w (k - c_b)^2 + v (k + j - e_b)^2, so the MTi's best delay is the mean of the c_b and
+    the laser's (k + j) the mean of the e_b. The sandwich must give the standard errors
+    of those means (the scatter over the number of blocks), exactly, for a quadratic."""
+    rng = np.random.default_rng(5)
+    n, w, v = 40, 3.0, 0.5
+    c, e = rng.normal(2.0, 3.0, n), rng.normal(-1.0, 7.0, n)
+
+    def share(b: int, kj: tuple[int, int]) -> float:
+        k, j = kj
+        return w * (k - c[b]) ** 2 + v * (k + j - e[b]) ** 2
+
+    parts: dict[tuple[int, int], dict[int, float]] = {}
+
+    def objective(kj: tuple[int, int]) -> float:
+        parts[kj] = {b: share(b, kj) for b in range(n)}
+        return sum(parts[kj].values())
+
+    k0 = round(float(c.mean()))
+    best = (k0, round(float(e.mean())) - k0)
+    s_mti, s_laser = _delay_errors(best, objective, parts, lambda k, j: True,
+                                   {"delay_s", "crowd_lag_s"})
+    assert s_mti == pytest.approx(np.std(c, ddof=1) / math.sqrt(n), rel=1e-9)
+    assert s_laser == pytest.approx(np.std(e, ddof=1) / math.sqrt(n), rel=1e-9)
+    # the laser alone searched (the MTi's delay given): its error is the same; a flat
+    # objective, or a neighbour beyond the bounds, has none
+    assert _delay_errors(best, objective, parts, lambda k, j: True, {"crowd_lag_s"})[1] == (
+        pytest.approx(s_laser, rel=1e-9))
+    assert math.isnan(_delay_errors(best, lambda kj: 1.0, parts, lambda k, j: True,
+                                    {"delay_s"})[0])
+    assert math.isnan(_delay_errors(best, objective, parts, lambda k, j: k <= k0,
+                                    {"delay_s", "crowd_lag_s"})[0])
 
 
 def test_params_file_records_terms_and_hyper(tmp_path) -> None:
