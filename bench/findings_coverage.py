@@ -19,8 +19,11 @@ often the truth lies within one and two of them and the RMS of error over standa
 deviation (1 when the figure is honest). The time skew's delays have their own bench
 (``bench/delay_uncertainty.py``).
 
+``--machine`` swaps parts of the machine for the thesis's (to take a bias apart) and
+``--magnitude`` fixes the effect's size (a bias that grows with it is a missing term).
+
 Usage: ``.venv/bin/python bench/findings_coverage.py [--seeds 10] [--jobs 2]
-[--effects NAME,...] [--json out.jsonl]``
+[--effects NAME,...] [--machine drawn] [--magnitude X] [--json out.jsonl]``
 """
 
 from __future__ import annotations
@@ -57,6 +60,27 @@ def truths(name: str, magnitude: float) -> dict[str, float]:
     raise ValueError(f"no truth for {name!r}")
 
 
+MACHINES = ("drawn", "thesis", "thesis-lowering-nominal", "drawn-thesis-drive")
+"""A machine drawn per case; the thesis's; the thesis's with its hoist field nominal when
+lowering (no stroke of the trials excluded as weak-field); a drawn one with the
+thesis's two-level drive (every lowering stroke excluded)."""
+
+
+def _machine(kind: str, drawn: Any, thesis: Any) -> Any:
+    from dataclasses import replace
+
+    if kind == "drawn":
+        return drawn
+    if kind == "thesis":
+        return thesis
+    if kind == "thesis-lowering-nominal":
+        return replace(thesis, plant=replace(
+            thesis.plant, hoist_field_lowering_a=thesis.plant.hoist_field_hoisting_a))
+    if kind == "drawn-thesis-drive":
+        return replace(drawn, drive=thesis.drive)
+    raise ValueError(f"unknown machine {kind!r}; expected one of {MACHINES}")
+
+
 def one(job: dict[str, Any]) -> dict[str, Any]:
     """Simulate one machine with the effect and identify the base model plus its term."""
     from shoveld.diagnose.data import DataSet
@@ -69,7 +93,7 @@ def one(job: dict[str, Any]) -> dict[str, Any]:
 
     name, mag, seed = job["effect"], job["magnitude"], job["seed"]
     base = 1000 * seed
-    machine = Machine.draw(base)
+    machine = _machine(job.get("machine", "drawn"), Machine.draw(base), Machine.ideal())
 
     def fx() -> list[Any]:
         return make_effects({name: mag}, form="bench")
@@ -116,6 +140,10 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=10, help="machines per effect")
     ap.add_argument("--effects", default=",".join(EFFECTS), metavar="NAME,...")
     ap.add_argument("--seed-offset", type=int, default=5000)
+    ap.add_argument("--machine", choices=MACHINES, default="drawn",
+                    help="which machine each case simulates (to take a bias apart)")
+    ap.add_argument("--magnitude", type=float,
+                    help="every case at this magnitude instead of one drawn from the range")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--json", help="write every case to this file (JSON lines)")
     args = ap.parse_args()
@@ -125,8 +153,11 @@ def main() -> None:
         raise SystemExit(f"--effects: no truth for {bad}; expected some of {list(EFFECTS)}")
     rng = np.random.default_rng(20261128)
     jobs = [{"effect": n, "magnitude": float(round(rng.uniform(*SIM_EFFECTS[n].typical_range), 3)),
-             "seed": args.seed_offset + 100 * i + s}
+             "seed": args.seed_offset + 100 * i + s, "machine": args.machine}
             for i, n in enumerate(names) for s in range(args.seeds)]
+    if args.magnitude is not None:
+        for j in jobs:
+            j["magnitude"] = args.magnitude
     print(f"{len(jobs)} cases on {args.jobs} processes...", file=sys.stderr)
     t0 = time.perf_counter()
     with ProcessPoolExecutor(args.jobs) as ex:
