@@ -539,7 +539,7 @@ output-error fit's covariance sums its scores: ``output_error.BLOCK_S``)."""
 
 def _block_shares(cal: Any, scale: np.ndarray) -> dict[int, float]:
     """The search's objective (each equation's mean squared residual in units of its
-    first value) split over blocks of ``BLOCK_S`` seconds of each file: its shares sum to
+    first value) split over blocks of ``DELAY_BLOCK_S`` seconds of each file: its shares sum to
     the objective. Blocks are counted from each file's first sample, so the same block
     holds the same stretch of the trial whatever the delay."""
     r = cal.row_residuals_
