@@ -25,18 +25,17 @@ from __future__ import annotations
 
 import argparse
 import itertools
-import json
 import math
 import os
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import numpy as np  # noqa: E402
+from _run import run_cases  # noqa: E402
 
 PAIR_EFFECTS = ("current_saturation", "ground_slope", "hoist_rope_mass",
                 "load_dependent_friction", "sensor_time_skew", "swing_centrifugal")
@@ -165,12 +164,7 @@ def main() -> None:
     jobs = bench_cases() if args.cases == "bench" else fresh_cases(args.n, args.seed)
     print(f"{len(jobs)} {args.cases} cases on {args.jobs} processes...", file=sys.stderr)
     t0 = time.perf_counter()
-    with ProcessPoolExecutor(args.jobs) as ex:
-        results = list(ex.map(one, jobs))
-    if args.json:
-        with open(args.json, "w") as f:
-            for r in results:
-                f.write(json.dumps(r) + "\n")
+    results = run_cases(one, jobs, args.jobs, args.json)
     summary(results)
     print(f"({time.perf_counter() - t0:.0f} s)")
 

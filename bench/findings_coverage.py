@@ -29,17 +29,16 @@ Usage: ``.venv/bin/python bench/findings_coverage.py [--seeds 10] [--jobs 2]
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import numpy as np  # noqa: E402
+from _run import run_cases  # noqa: E402
 
 EFFECTS = ("hoist_rope_mass", "ground_slope", "payload_cog_offset")
 
@@ -160,12 +159,7 @@ def main() -> None:
             j["magnitude"] = args.magnitude
     print(f"{len(jobs)} cases on {args.jobs} processes...", file=sys.stderr)
     t0 = time.perf_counter()
-    with ProcessPoolExecutor(args.jobs) as ex:
-        results = list(ex.map(one, jobs))
-    if args.json:
-        with open(args.json, "w") as f:
-            for r in results:
-                f.write(json.dumps(r) + "\n")
+    results = run_cases(one, jobs, args.jobs, args.json)
     summary(results)
     print(f"({time.perf_counter() - t0:.0f} s)")
 
