@@ -35,7 +35,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import numpy as np  # noqa: E402
-from _run import run_cases  # noqa: E402
+from _run import model_error, run_cases  # noqa: E402
 
 PAIR_EFFECTS = ("current_saturation", "ground_slope", "hoist_rope_mass",
                 "load_dependent_friction", "sensor_time_skew", "swing_centrifugal")
@@ -116,21 +116,6 @@ def one(job: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def _model_error(e: np.ndarray, a: np.ndarray) -> float:
-    """The type B u that makes the RMS of e / sqrt(a^2 + u^2) one (0 if the search's own
-    standard errors already cover): bisection, the function falls with u."""
-    def rms_z(u: float) -> float:
-        return float(np.sqrt(np.mean(e**2 / (a**2 + u**2))))
-
-    if rms_z(0.0) <= 1.0:
-        return 0.0
-    lo, hi = 0.0, float(np.abs(e).max()) + 1.0
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if rms_z(mid) > 1.0 else (lo, mid)
-    return 0.5 * (lo + hi)
-
-
 def summary(results: list[dict[str, Any]]) -> None:
     from shoveld.model.effects import SensorTimeSkew
 
@@ -140,7 +125,7 @@ def summary(results: list[dict[str, Any]]) -> None:
         e = np.array([r[dev]["error_s"] for r in results]) * 1000
         a = np.array([r[dev]["std_a_s"] for r in results]) * 1000
         s = np.array([r[dev]["std_s"] for r in results]) * 1000
-        need = _model_error(e, a)
+        need = model_error(e, a)
         print(f"{dev:5s}: error {e.mean():+.1f} +- {e.std():.1f} (RMS {np.sqrt(np.mean(e**2)):.1f}"
               f", largest {np.abs(e).max():.0f})")
         for label, sd in (("search's own", a), ("reported", s)):

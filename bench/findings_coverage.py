@@ -12,7 +12,12 @@ the truth:
 * ``hoist_rope_mass``: the ropes' mass per metre;
 * ``ground_slope``: the boom's tilt per degree of deck pitch, 1 on a slope;
 * ``payload_cog_offset``: the load's centre of gravity in front of and below the bail
-  (the bench form is a heap in the bowl: the truth is its centre of mass).
+  (the bench form is a heap in the bowl: the truth is its centre of mass);
+* ``swing_centrifugal``: the swing axis to the shipper shaft (the simulated arm turns
+  in 3D at that radius);
+* ``load_dependent_friction``: the shipper shaft's friction per tonne of load (the
+  simulated coefficient on a 0.5 m bearing radius; the saddle block's depends on the
+  handle's angle in the simulator, so it has no single truth).
 
 Prints per value the error (mean +- sd), the reported standard deviation (median), how
 often the truth lies within one and two of them and the RMS of error over standard
@@ -38,9 +43,10 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import numpy as np  # noqa: E402
-from _run import run_cases  # noqa: E402
+from _run import model_error, run_cases  # noqa: E402
 
-EFFECTS = ("hoist_rope_mass", "ground_slope", "payload_cog_offset")
+EFFECTS = ("hoist_rope_mass", "ground_slope", "payload_cog_offset", "swing_centrifugal",
+           "load_dependent_friction")
 
 
 def truths(name: str, magnitude: float) -> dict[str, float]:
@@ -56,6 +62,11 @@ def truths(name: str, magnitude: float) -> dict[str, float]:
         heap = np.array(e._heap())  # (share, along the handle, across it, up positive)
         return {"load centre of gravity in front": float(heap[:, 0] @ heap[:, 1]),
                 "load centre of gravity below": float(-(heap[:, 0] @ heap[:, 2]))}
+    if name == "swing_centrifugal":
+        return {"swing axis to shipper shaft": magnitude}
+    if name == "load_dependent_friction":
+        (e,) = make_effects({name: magnitude}, form="bench")
+        return {"shipper-shaft friction per tonne": 1000.0 * magnitude * e.shaft_radius_m * 9.81}
     raise ValueError(f"no truth for {name!r}")
 
 
@@ -111,25 +122,28 @@ def one(job: dict[str, Any]) -> dict[str, Any]:
     for f in findings(params, [name]).get(name, []):
         key = next((k for k in true if f["what"].startswith(k)), None)
         if key is not None:
-            out.append({"what": key, "value": f["value"], "std": f["std"], "truth": true[key]})
+            out.append({"what": key, "value": f["value"], "std": f["std"],
+                        "std_fit": f["std_fit"], "truth": true[key]})
     return {**job, "findings": out, "fit_s": time.perf_counter() - t0,
             "with_passes": train is not None}
 
 
 def summary(results: list[dict[str, Any]]) -> None:
-    rows: dict[str, list[tuple[float, float]]] = {}
+    rows: dict[str, list[tuple[float, float, float]]] = {}
     for r in results:
         for f in r["findings"]:
             rows.setdefault(f"{r['effect']}: {f['what']}", []).append(
-                (f["value"] - f["truth"], f["std"]))
+                (f["value"] - f["truth"], f["std"], f.get("std_fit", f["std"])))
     print("value: error mean +- sd | reported std, median | truth within 1 / 2 std | "
-          "RMS error/std")
+          "RMS error/std | the same with the fit's std alone | model error that makes "
+          "that RMS one")
     for what, v in rows.items():
-        e, s = np.array(v).T
-        z = e / s
+        e, s, a = np.array(v).T
+        z, za = e / s, e / a
         print(f"{what}: {e.mean():+.4g} +- {e.std():.3g} | {np.median(s):.3g} | "
               f"{int(np.sum(np.abs(z) <= 1))}/{len(z)}, {int(np.sum(np.abs(z) <= 2))}/{len(z)} "
-              f"| {np.sqrt(np.mean(z**2)):.2f}")
+              f"| {np.sqrt(np.mean(z**2)):.2f} | {np.sqrt(np.mean(za**2)):.2f} "
+              f"| {model_error(e, a):.3g}")
 
 
 def main() -> None:

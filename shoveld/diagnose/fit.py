@@ -30,7 +30,10 @@ from shoveld.signals.table import SignalsTable
 
 N_FOLDS = 3
 SWING_EXCITED_RAD_S = 0.1
-"""A calibration trial swinging faster than this excites the swing terms."""
+SWING_EXCITED_S = 5.0
+"""Calibration trials that swing faster than ``SWING_EXCITED_RAD_S`` for this long (a
+swing to a truck and back) excite the swing terms; otherwise the verified passes are
+needed."""
 
 
 class DiagCalibrator(Calibrator):
@@ -78,7 +81,7 @@ def needs_operation(model: Model, dataset: DataSet) -> bool:
         return True
     if not any(getattr(t, "needs_swing", False) for t in model.terms):
         return False
-    return dataset.calib_swing_rate() < SWING_EXCITED_RAD_S
+    return dataset.calib_swing_s(SWING_EXCITED_RAD_S) < SWING_EXCITED_S
 
 
 def fit(dataset: DataSet, effects: list[str], hyper: dict[str, dict[str, Any]],

@@ -37,16 +37,21 @@ def findings(p: ModelParams, found: list[str]) -> dict[str, list[dict[str, Any]]
     out: dict[str, list[dict[str, Any]]] = {}
     for t in p.model().terms:
         if t.name in found and hasattr(t, "findings"):
-            out[t.name] = [{**f, "value": round(float(f["value"]), 5),
-                            "std": round(float(f["std"]), 5)}
+            out[t.name] = [{**f, **{k: round(float(f[k]), 5) for k in ("value", "std", "std_fit")}}
                            for f in t.findings(p.names, p.values, p.cov)]
     return out
 
 
 def finding_text(f: dict[str, Any]) -> str:
-    """'load centre of gravity ...: 0.62 +- 0.08 m'."""
+    """'load centre of gravity ...: 0.62 +- 0.08 m', and the data's part of the ± where
+    a model error is in it (``ExtensionTerm.model_error``)."""
     unit = f" {f['unit']}" if f["unit"] else ""
-    return f"{f['what']}: {f['value']:.3g} ± {f['std']:.2g}{unit}"
+    text = f"{f['what']}: {f['value']:.3g} ± {f['std']:.2g}{unit}"
+    fit = f.get("std_fit", f["std"])
+    if f["std"] > 1.01 * fit:
+        text += (f" (the data's part ± {fit:.2g}, the model's "
+                 f"± {math.sqrt(f['std'] ** 2 - fit**2):.2g})")
+    return text
 
 
 def added(candidate: str, found: list[str]) -> bool:

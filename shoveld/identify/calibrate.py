@@ -285,9 +285,10 @@ class Calibrator:
     """The output-error fit behind ``params_`` (its angle sensitivities, noise model)."""
     stages_: list[StageResult] = field(default_factory=list, init=False)
     row_residuals_: np.ndarray | None = field(default=None, init=False)
-    """(N, 2): the equation-error fit's residual per used sample (the rows of ``files_``
-    with ``use``, in order), in the equations' units; what a search over a delay sums
-    block by block for its standard error (``SensorTimeSkew``)."""
+    """(N, 2): the fit's residual per used sample (the rows of ``files_`` with ``use``, in
+    order): the equation-error form's in the equations' units, the output-error form's
+    in amps (NaN where a channel is not used); what a search over a hyper-parameter sums
+    block by block (``shoveld.model.effects``)."""
 
     def prepare(self, tables: list[SignalsTable]) -> list[FileData]:
         return [exclusion_masks(t, self.model, self.exclusion, self.window_s, self.polyorder)
@@ -364,6 +365,7 @@ class Calibrator:
                                 files, self.window_s, self.polyorder)
                             if self.position_noise else ())
             self.output_fit_ = of
+            self.row_residuals_ = of.row_residuals
             p, cov = of.p, of.cov
             sigma = np.array([of.force_rms["handle"], of.force_rms["crowd"]])
             current_noise = of.noise

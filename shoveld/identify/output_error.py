@@ -71,6 +71,9 @@ class OutputFit:
     corrected: bool = False
     """Whether the inputs' noise was taken out (False: none given, or the corrected
     steps diverged and the uncorrected fit was kept)."""
+    row_residuals: np.ndarray | None = None
+    """(N, 2) A: each used sample's hoist and crowd current residual, NaN where the
+    channel is not used (what a search over a hyper-parameter sums block by block)."""
 
 
 def concat_kinematics(parts: list[Kinematics]) -> Kinematics:
@@ -359,4 +362,4 @@ def fit_output(model: Model, kins: list[Kinematics], payloads: list[np.ndarray],
                    "crowd": float(np.sqrt(np.mean((r[:, 1] * g_c)[good[:, 1]] ** 2)))},
         condition_number=float(sv[0] / sv[-1]) if sv[-1] > 0 else math.inf,
         samples=int(len(m)), iterations=iterations, blocks=nb, angle_sensitivity=sens,
-        corrected=corrected)
+        corrected=corrected, row_residuals=np.where(good, r, np.nan))

@@ -21,6 +21,7 @@ from shoveld.model.effects import (
     DRIVE_STREAM,
     EFFECT_TERMS,
     _delay_errors,
+    _parabola,
     _unit_hoist,
     _unit_hoist_dboom,
 )
@@ -243,6 +244,42 @@ def test_a_machine_on_a_steep_slope_gives_kappa_one() -> None:
     assert abs(kappa - 1.0) < min(3 * kappa_se, 0.03), (kappa, kappa_se)
 
 
+def test_the_swing_radius_is_found_where_the_trials_do_not_swing() -> None:
+    """A realistic machine whose trials never swing, but whose swing angle's noise,
+    differentiated, passes 0.1 rad/s once: the swing's radius needs the verified passes,
+    and on them the search finds the true 5.59 m within two of its standard errors and
+    0.1 m. Before 2026-11-28 the trials alone were taken (their largest swing rate
+    passed the threshold) and the radius came out 0.0 m."""
+    from shoveld.diagnose.data import DataSet
+    from shoveld.diagnose.fit import SWING_EXCITED_RAD_S, fit, needs_operation
+    from shoveld.sim.machine import Machine
+    from shoveld.sim.scenario import simulate_calibration
+
+    seed, r0 = 7001, 5.586  # a machine and a radius drawn for the bench (notes in docs)
+    machine = Machine.draw(1000 * seed)
+
+    def fx() -> list:
+        return make_effects({"swing_centrifugal": r0}, form="bench")
+
+    trials = [simulate_calibration(load, 1000 * seed + i + 1, effects=fx(),
+                                   machine=machine).table
+              for i, load in enumerate((0.0, 8420.0))]
+    ops = simulate_cycles(24, 1000 * seed + 3, payload_range=(3000.0, 35000.0),
+                          truck_target_kg=None, verified_fraction=0.5, effects=fx(),
+                          machine=machine)
+    ds = DataSet(trials, [ops.table])
+    peak = max(float(np.nanmax(np.abs(f.kin.swing_rate)))
+               for f in ds.calib_files(Model.from_names([])))
+    assert peak > SWING_EXCITED_RAD_S  # the noise's one spike
+    model = Model.from_names(["swing_centrifugal"])
+    assert needs_operation(model, ds)
+    p = fit(ds, ["swing_centrifugal"], {}, {q.index for q in ds.passes if q.verified})
+    term = p.model().terms[-1]
+    (what, unit, value, std), = term.searched()
+    assert unit == "m" and value == p.hyper["swing_centrifugal"]["R0_m"]
+    assert abs(value - r0) <= min(2 * std, 0.1), (value, std)
+
+
 def test_the_delays_standard_errors_are_the_blocks_scatter_through_the_curvature() -> None:
     """Blocks whose own best delays scatter: block b's share of the objective is
     w (k - c_b)^2 + v (k + j - e_b)^2, so the MTi's best delay is the mean of the c_b and
@@ -276,6 +313,38 @@ def test_the_delays_standard_errors_are_the_blocks_scatter_through_the_curvature
                                     {"delay_s"})[0])
     assert math.isnan(_delay_errors(best, objective, parts, lambda k, j: k <= k0,
                                     {"delay_s", "crowd_lag_s"})[0])
+
+
+def test_a_searched_values_standard_error_is_the_blocks_scatter_at_the_vertex() -> None:
+    """Blocks whose own best values c_b scatter, block b's share of the profile
+    w (x - c_b)^2: the minimum is the mean of the c_b, and from three points a whole
+    step away from it the parabola must give that mean and the standard error of the
+    mean, exactly (each block's gradient taken at the vertex, not at the centre)."""
+    rng = np.random.default_rng(11)
+    n, w, step = 30, 2.0, 1.0
+    c = rng.normal(4.4, 0.5, n)
+    x0 = float(c.mean()) + 0.9  # the equation-error search's miss
+    xs = (x0, x0 + step, x0 - step)
+    parts = [{b: w * (x - c[b]) ** 2 for b in range(n)} for x in xs]
+    s = [sum(p.values()) for p in parts]
+    dx, std = _parabola(step, s, parts)
+    assert x0 + dx == pytest.approx(c.mean(), abs=1e-9)
+    assert std == pytest.approx(np.std(c, ddof=1) / math.sqrt(n), rel=1e-9)
+    # no curvature: no minimum, no error
+    assert all(math.isnan(v) for v in _parabola(step, [1.0, 1.0, 1.0], parts))
+
+
+@pytest.mark.parametrize("name", sorted(EFFECT_TERMS))
+def test_every_model_error_belongs_to_a_value_the_term_reports(name: str) -> None:
+    """A model error is looked up by its value's wording: one that matches none would be
+    left out of the reported uncertainty without a word."""
+    term = TERMS[name]()
+    words = [q[0] for q in term.quantities()] + [q[0] for q in term.searched()]
+    assert set(term.model_error) <= set(words)
+    n = len(Model.from_names([name]).param_names)
+    for f in term.findings(Model.from_names([name]).param_names, np.ones(n), np.eye(n) * 1e-6):
+        m = term.error_of(f["what"])
+        assert f["std"] == pytest.approx(math.hypot(f["std_fit"], m))
 
 
 def test_params_file_records_terms_and_hyper(tmp_path) -> None:
