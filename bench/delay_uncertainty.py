@@ -24,7 +24,6 @@ Usage: ``.venv/bin/python bench/delay_uncertainty.py [--cases fresh] [--n 50]
 from __future__ import annotations
 
 import argparse
-import itertools
 import math
 import os
 import sys
@@ -46,29 +45,15 @@ SKEW = "sensor_time_skew"
 
 
 def bench_cases() -> list[dict[str, Any]]:
-    """The matrix's skew cases, drawn as ``bench/diagnose_matrix.py`` draws them."""
-    from shoveld.diagnose.core import MODELLED_BY_BASE
-    from shoveld.sim.effects import SIM_EFFECTS
+    """The matrix's skew cases, drawn by ``bench/diagnose_matrix.py``'s own ``draw_jobs``:
+    the singles (``--seeds 3``, the default draw) and the pairs of its sets."""
+    from diagnose_matrix import draw_jobs
 
-    out = []
-    rng = np.random.default_rng(20261122)  # the singles: --seeds 3, default draw
-    for name in sorted(SIM_EFFECTS):
-        lo, hi = SIM_EFFECTS[name].typical_range
-        for s in range(3):
-            mag = float(round(rng.uniform(lo, hi), 3))
-            if name == SKEW:
-                out.append({"spec": {name: mag}, "seed": 100 + s})
-    pairs = list(itertools.combinations([n for n in PAIR_EFFECTS if n not in MODELLED_BY_BASE],
-                                        2))
+    jobs = draw_jobs(3, 0, 0, None, 24, 20261122, 0)
     for draw, off in MATRIX_SETS:
-        rng = np.random.default_rng(draw)
-        for s, k in enumerate(rng.choice(len(pairs), size=15, replace=False)):
-            a, b = pairs[int(k)]
-            spec = {n: float(round(rng.uniform(*SIM_EFFECTS[n].typical_range), 3))
-                    for n in (a, b)}
-            if SKEW in spec:
-                out.append({"spec": spec, "seed": off + 800 + s})
-    return out
+        jobs += draw_jobs(0, 0, 15, list(PAIR_EFFECTS), 24, draw, off)
+    return [{"spec": j["spec"], "seed": j["seed"]} for j in jobs
+            if j["kind"] in ("single", "pair") and SKEW in j["spec"]]
 
 
 def fresh_cases(n: int, seed: int) -> list[dict[str, Any]]:

@@ -151,6 +151,45 @@ def _settings(items: list[str]) -> dict[str, Any]:
     return out
 
 
+def draw_jobs(seeds: int, null: int, pairs: int, pair_effects: list[str] | None,
+              passes: int, draw_seed: int, seed_offset: int) -> list[dict[str, Any]]:
+    """The matrix's cases: per effect ``seeds`` singles, ``null`` clean machines and
+    ``pairs`` pairs drawn among ``pair_effects`` (all but those the base model carries
+    when None), each pair with its two effects alone on the same machine; magnitudes
+    and pairs drawn with ``draw_seed``, machines and sessions offset by ``seed_offset``
+    (other benches draw the matrix's cases through this, so that they stay the same)."""
+    from shoveld.sim.effects import SIM_EFFECTS
+
+    names = sorted(SIM_EFFECTS)
+    rng = np.random.default_rng(draw_seed)
+    off = seed_offset
+    jobs: list[dict[str, Any]] = []
+    for name in names:
+        lo, hi = SIM_EFFECTS[name].typical_range
+        for s in range(seeds):
+            mag = float(round(rng.uniform(lo, hi), 3))
+            jobs.append({"kind": "single", "truth": name, "spec": {name: mag},
+                         "seed": off + 100 + s, "passes": passes})
+    for s in range(null):
+        jobs.append({"kind": "null", "truth": "none", "spec": {}, "seed": off + 500 + s,
+                     "passes": passes})
+    pool = [n for n in (pair_effects or names) if n not in MODELLED_BY_BASE]
+    unknown = [n for n in pool if n not in SIM_EFFECTS]
+    if unknown:
+        raise ValueError(f"unknown effect(s) {unknown}; expected some of {names}")
+    combos = list(itertools.combinations(pool, 2))
+    for s, k in enumerate(rng.choice(len(combos), size=min(pairs, len(combos)),
+                                     replace=False)):
+        a, b = combos[int(k)]
+        spec = {n: float(round(rng.uniform(*SIM_EFFECTS[n].typical_range), 3)) for n in (a, b)}
+        jobs.append({"kind": "pair", "truth": f"{a}+{b}", "spec": spec, "seed": off + 800 + s,
+                     "passes": passes})
+        for n in (a, b):
+            jobs.append({"kind": "alone", "truth": n, "spec": {n: spec[n]}, "seed": off + 800 + s,
+                         "passes": passes, "base_only": True, "pair": f"{a}+{b}"})
+    return jobs
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", type=int, default=6, help="seeds per effect")
@@ -186,34 +225,12 @@ def main() -> None:
     from shoveld.sim.effects import SIM_EFFECTS
 
     names = sorted(SIM_EFFECTS)
-    rng = np.random.default_rng(args.draw_seed)
-    off = args.seed_offset
-    jobs: list[dict[str, Any]] = []
-    for name in names:
-        lo, hi = SIM_EFFECTS[name].typical_range
-        for s in range(args.seeds):
-            mag = float(round(rng.uniform(lo, hi), 3))
-            jobs.append({"kind": "single", "truth": name, "spec": {name: mag},
-                         "seed": off + 100 + s, "passes": args.passes})
-    for s in range(args.null):
-        jobs.append({"kind": "null", "truth": "none", "spec": {}, "seed": off + 500 + s,
-                     "passes": args.passes})
-    pool = [n for n in (args.pair_effects.split(",") if args.pair_effects else names)
-            if n not in MODELLED_BY_BASE]
-    unknown = [n for n in pool if n not in SIM_EFFECTS]
-    if unknown:
-        raise SystemExit(f"--pair-effects: unknown effect(s) {unknown}; expected some of "
-                         f"{names}")
-    pairs = list(itertools.combinations(pool, 2))
-    for s, k in enumerate(rng.choice(len(pairs), size=min(args.pairs, len(pairs)),
-                                     replace=False)):
-        a, b = pairs[int(k)]
-        spec = {n: float(round(rng.uniform(*SIM_EFFECTS[n].typical_range), 3)) for n in (a, b)}
-        jobs.append({"kind": "pair", "truth": f"{a}+{b}", "spec": spec, "seed": off + 800 + s,
-                     "passes": args.passes})
-        for n in (a, b):
-            jobs.append({"kind": "alone", "truth": n, "spec": {n: spec[n]}, "seed": off + 800 + s,
-                         "passes": args.passes, "base_only": True, "pair": f"{a}+{b}"})
+    try:
+        jobs = draw_jobs(args.seeds, args.null, args.pairs,
+                         args.pair_effects.split(",") if args.pair_effects else None,
+                         args.passes, args.draw_seed, args.seed_offset)
+    except ValueError as e:
+        raise SystemExit(f"--pair-effects: {e}") from None
     t0 = time.perf_counter()
     select = _settings(args.select)
     if args.cache:
