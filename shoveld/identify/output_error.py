@@ -312,7 +312,8 @@ def fit_output(model: Model, kins: list[Kinematics], payloads: list[np.ndarray],
             jw = np.where(np.isfinite(jac := ce.jacobian(plain, m)), jac, 0.0) * w[:, :, None]
             jr = jw.reshape(-1, n_p)
             se = np.sqrt(np.abs(np.diag(np.linalg.pinv(jr.T @ jr)))) + 1e-12
-            converged = float(np.max(np.abs(p - plain) / se)) < RUNAWAY_SE
+            with np.errstate(over="ignore"):  # a runaway's step overflows: inf is "not converged"
+                converged = float(np.max(np.abs(p - plain) / se)) < RUNAWAY_SE
         if not converged:
             p, corrected = plain, False
 

@@ -31,6 +31,7 @@ from shoveld.sample import samples_from_table
 from shoveld.sim.effects import DRUM_XY, SIM_EFFECTS, make_effects
 from shoveld.sim.plant import PlantParams
 from shoveld.sim.scenario import SensorNoise, simulate_cycles
+from tests.diagnose.conftest import session
 
 QUIET = SensorNoise().scaled(1e-9)
 
@@ -253,21 +254,11 @@ def test_the_swing_radius_is_found_where_the_trials_do_not_swing() -> None:
     from shoveld.diagnose.data import DataSet
     from shoveld.diagnose.fit import SWING_EXCITED_RAD_S, fit, needs_operation
     from shoveld.sim.machine import Machine
-    from shoveld.sim.scenario import simulate_calibration
 
     seed, r0 = 7001, 5.586  # a machine and a radius drawn for the bench (notes in docs)
-    machine = Machine.draw(1000 * seed)
-
-    def fx() -> list:
-        return make_effects({"swing_centrifugal": r0}, form="bench")
-
-    trials = [simulate_calibration(load, 1000 * seed + i + 1, effects=fx(),
-                                   machine=machine).table
-              for i, load in enumerate((0.0, 8420.0))]
-    ops = simulate_cycles(24, 1000 * seed + 3, payload_range=(3000.0, 35000.0),
-                          truck_target_kg=None, verified_fraction=0.5, effects=fx(),
-                          machine=machine)
-    ds = DataSet(trials, [ops.table])
+    trials, measured, _ = session({"swing_centrifugal": r0}, 1000 * seed, form="bench",
+                                  machine=Machine.draw(1000 * seed))
+    ds = DataSet(trials, measured)
     peak = max(float(np.nanmax(np.abs(f.kin.swing_rate)))
                for f in ds.calib_files(Model.from_names([])))
     assert peak > SWING_EXCITED_RAD_S  # the noise's one spike
