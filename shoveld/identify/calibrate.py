@@ -331,8 +331,8 @@ class Calibrator:
         if any(a is not b for a, b in zip(terms, self.model.terms, strict=True)):
             self.model = Model(terms)
         for t in self.model.terms:
-            # A term with a nonlinear constant (a delay, a radius) finds it first by a 1-D
-            # search over fits of this same calibrator (shoveld.model.effects).
+            # A term with a nonlinear constant (a delay, a radius, the slope's rope pull)
+            # finds it first by fits of this same calibrator (shoveld.model.effects).
             search = getattr(t, "search_hyper", None)
             if search is not None:
                 search(self, tables)
