@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -224,24 +225,33 @@ def test_the_slope_moves_the_sheave_by_the_decks_lean_in_the_arm_plane_exactly()
     assert np.abs(first - want).max() > 1e-3 * np.abs(want).max()
 
 
+def _slope_on_trials(machine: Any, degrees: float, seed: int, form: str = "test"
+                     ) -> tuple[ModelParams, float, float]:
+    """Base + slope identified on empty and 8,420 kg trials (seeds ``seed`` and
+    ``seed + 1``) on ``machine`` standing on a slope: the params, kappa and its standard
+    error."""
+    from shoveld.identify.calibrate import Calibrator
+    from shoveld.sim.scenario import simulate_calibration
+
+    trials = [simulate_calibration(load, seed + i, machine=machine,
+                                   effects=make_effects({"ground_slope": degrees}, form=form)
+                                   ).table for i, load in enumerate((0.0, 8420.0))]
+    p = Calibrator(Model.from_names(["ground_slope"])).fit(trials).params_
+    assert p is not None
+    k_h = p.get("K_H")
+    return p, p.get("K_H_pitch") / k_h, float(p.stderr[p.names.index("K_H_pitch")]) / k_h
+
+
 def test_a_machine_on_a_steep_slope_gives_kappa_one() -> None:
     """Identified on trials on a 9 degree slope, every stroke kept (the thesis's machine,
     its hoist field nominal when lowering too), the slope's kappa is 1 within three
     standard errors and 3 %. The first-order form found 0.81 +- 0.01 here."""
-    from shoveld.identify.calibrate import Calibrator
     from shoveld.sim.machine import Machine
-    from shoveld.sim.scenario import simulate_calibration
 
     m = Machine.ideal()
     m = dataclasses.replace(m, plant=dataclasses.replace(
         m.plant, hoist_field_lowering_a=m.plant.hoist_field_hoisting_a))
-    trials = [simulate_calibration(load, 41 + i, effects=make_effects({"ground_slope": 9.0}),
-                                   machine=m).table for i, load in enumerate((0.0, 8420.0))]
-    p = Calibrator(Model.from_names(["ground_slope"])).fit(trials).params_
-    assert p is not None
-    v = dict(zip(p.names, p.values, strict=True))
-    se = dict(zip(p.names, p.stderr, strict=True))
-    kappa, kappa_se = v["K_H_pitch"] / v["K_H"], se["K_H_pitch"] / v["K_H"]
+    _, kappa, kappa_se = _slope_on_trials(m, 9.0, 41)
     assert abs(kappa - 1.0) < min(3 * kappa_se, 0.03), (kappa, kappa_se)
 
 
@@ -254,20 +264,12 @@ def test_the_slope_pulls_with_the_current_at_the_field_less_the_sensors_offset(
     field's pull on every row); on a drawn machine (its drive weakening the field when
     lowering fast, its hoist sensors reading 9.6 A high in sum) kappa was 0.938 +- 0.020.
     The ratios come from the fit's own field curve and the offset from its ``i_H0``."""
-    from shoveld.identify.calibrate import Calibrator
     from shoveld.sim.machine import Machine
-    from shoveld.sim.scenario import simulate_calibration
 
     m = Machine.ideal() if machine == "thesis" else Machine.draw(5_000_000)
-    trials = [simulate_calibration(load, 5_000_001 + i, machine=m,
-                                   effects=make_effects({"ground_slope": 5.5}, form="bench")
-                                   ).table for i, load in enumerate((0.0, 8420.0))]
-    p = Calibrator(Model.from_names(["ground_slope"])).fit(trials).params_
-    assert p is not None
-    v = dict(zip(p.names, p.values, strict=True))
-    se = dict(zip(p.names, p.stderr, strict=True))
-    kappa, kappa_se = v["K_H_pitch"] / v["K_H"], se["K_H_pitch"] / v["K_H"]
+    p, kappa, kappa_se = _slope_on_trials(m, 5.5, 5_000_001, form="bench")
     assert abs(kappa - 1.0) < min(3 * kappa_se, 0.03), (kappa, kappa_se)
+    v = p.as_dict()
     h = p.hyper["ground_slope"]
     assert h["pull_offset_a"] == pytest.approx(v["i_H0"], abs=1.0)
     drive = p.hyper["hoist_drive"]
