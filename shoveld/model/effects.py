@@ -876,8 +876,80 @@ class CurrentSaturation(ExtensionTerm):
                  lambda v: 100.0 * v["K_H3"] / v["K_H"])]
 
 
+class RopePull:
+    """The hoist rope's pull over K_H, for terms whose effect grows with the pull itself
+    (a tilted or a sagging boom turns it): not the current as read. The sensors' offset
+    comes off it, and at a weakened field an ampere pulls less (``pull``), from the fit's
+    own ``i_H0`` and field curve (``search_hyper``). With the current as read, the thesis's
+    machine (its lowering strokes at 30 A) gave the slope's kappa 0.61 +- 0.05 for 1 and
+    the boom's drop 0.2-0.4 of the simulated one (docs/diagnosis.md, eighteenth and
+    nineteenth sessions)."""
+
+    hyper: dict[str, Any]
+    given: set[str]
+
+    PULL_KEYS: ClassVar[tuple[str, ...]] = (
+        "field_nominal_a", "field_knots_a", "above_top_knot", "below_bottom_knot",
+        "spline_ends")
+    """The hoist drive's curve settings, copied into ``hyper`` beside ``pull_ratios``."""
+    _drive: Any = None
+    """The hoist drive's curve built from those settings (``pull``), once."""
+
+    def search_hyper(self, cal: Any, tables: list[Any]) -> None:
+        """What the rope's pull needs beside the current (``pull``), from fits of
+        ``cal``'s model (this term taking the current as read) on ``tables``: the pull
+        per ampere over the field relative to the nominal field's (``pull_ratios``:
+        K_H_f<A> / K_H at the hoist drive's knots) and the hoist current sensors' offset
+        (``pull_offset_a``: the fit's ``i_H0``). The equation-error form once, with the
+        current as read (it has no offsets), then for an output-error calibrator that
+        fit once. Data at one field need no ratios. Then the term's own searches."""
+        self._search_pull(cal, tables)
+        super().search_hyper(cal, tables)  # type: ignore[misc]
+
+    def _search_pull(self, cal: Any, tables: list[Any]) -> None:
+        from shoveld.model.terms import HoistDrive
+
+        if "pull_offset_a" in self.given:
+            return
+        drive = next((t for t in cal.model.terms if isinstance(t, HoistDrive)), None)
+        several = drive is not None and len(drive.knots) > 1
+        methods = dict.fromkeys(("equation", cal.method) if several else (cal.method,))
+        if drive is None or methods.keys() == {"equation"} and not several:
+            return
+        self.given.add("pull_offset_a")  # the inner fits keep what they are given
+        self.hyper["pull_offset_a"] = 0.0
+        if several:
+            self.hyper.update({key: drive.hyper[key] for key in self.PULL_KEYS
+                               if key in drive.hyper})
+            self.hyper["pull_ratios"] = [1.0] * len(drive.knots)
+        self._drive = None
+        for method in methods:
+            inner, _, _ = _profile_point(cal, tables, [], method)
+            v = inner.params_.as_dict()
+            if several:
+                self.hyper["pull_ratios"] = [v[name] / v["K_H"] for name in drive.params]
+            self.hyper["pull_offset_a"] = v.get("i_H0", 0.0)
+            self._drive = None
+
+    def pull(self, k: Kinematics) -> np.ndarray:
+        """The rope's pull over K_H: the hoist current less its sensors' offset
+        (``pull_offset_a``), times the pull per ampere at each row's field relative to
+        the nominal field's (``pull_ratios`` on the hoist drive's curve). Without them,
+        the current as measured at the nominal field's pull."""
+        i = k.i_h_est - float(self.hyper.get("pull_offset_a", 0.0))
+        ratios = self.hyper.get("pull_ratios")
+        if not ratios:
+            return i
+        if self._drive is None:
+            from shoveld.model.terms import HoistDrive
+
+            self._drive = HoistDrive(**{key: self.hyper[key] for key in self.PULL_KEYS
+                                        if key in self.hyper})
+        return i * (self._drive._basis(k) @ np.asarray(ratios, dtype=float))
+
+
 @register_term
-class GroundSlope(ExtensionTerm):
+class GroundSlope(RopePull, ExtensionTerm):
     """The machine stands on a slope; the cab inclinometer sees the tilt.
 
     The handle angle comes from a gravity-referenced sensor, but the boom angle is
@@ -921,63 +993,6 @@ class GroundSlope(ExtensionTerm):
         """The deck's lean in the arm plane (rad) from the inclinometer's pitch and roll."""
         sp, sr = np.sin(k.pitch), np.sin(k.roll)
         return np.arctan2(sp, np.sqrt(np.clip(1.0 - sp * sp - sr * sr, 0.0, None)))
-
-    PULL_KEYS: ClassVar[tuple[str, ...]] = (
-        "field_nominal_a", "field_knots_a", "above_top_knot", "below_bottom_knot",
-        "spline_ends")
-    """The hoist drive's curve settings, copied into ``hyper`` beside ``pull_ratios``."""
-    _drive: Any = None
-    """The hoist drive's curve built from those settings (``pull``), once."""
-
-    def search_hyper(self, cal: Any, tables: list[Any]) -> None:
-        """What the rope's pull needs beside the current (``pull``), from fits of
-        ``cal``'s model on ``tables``: the pull per ampere over the field relative to the
-        nominal field's (``pull_ratios``: K_H_f<A> / K_H at the hoist drive's knots) and
-        the hoist current sensors' offset (``pull_offset_a``: the fit's ``i_H0``). The
-        equation-error form once, with the current as read (it has no offsets), then for
-        an output-error calibrator that fit once. On the thesis's machine, whose lowering
-        strokes run at 30 A, the current as read took kappa to 0.61 +- 0.05, and the
-        hoist sensors' 9.6 A offset took a drawn machine's to 0.96; now 1.00 and 1.01
-        (docs/diagnosis.md, eighteenth session). Data at one field need no ratios."""
-        from shoveld.model.terms import HoistDrive
-
-        if "pull_offset_a" in self.given:
-            return
-        drive = next((t for t in cal.model.terms if isinstance(t, HoistDrive)), None)
-        several = drive is not None and len(drive.knots) > 1
-        methods = dict.fromkeys(("equation", cal.method) if several else (cal.method,))
-        if drive is None or methods.keys() == {"equation"} and not several:
-            return
-        self.given.add("pull_offset_a")  # the inner fits keep what they are given
-        self.hyper["pull_offset_a"] = 0.0
-        if several:
-            self.hyper.update({key: drive.hyper[key] for key in self.PULL_KEYS
-                               if key in drive.hyper})
-            self.hyper["pull_ratios"] = [1.0] * len(drive.knots)
-        self._drive = None
-        for method in methods:
-            inner, _, _ = _profile_point(cal, tables, [], method)
-            v = inner.params_.as_dict()
-            if several:
-                self.hyper["pull_ratios"] = [v[name] / v["K_H"] for name in drive.params]
-            self.hyper["pull_offset_a"] = v.get("i_H0", 0.0)
-            self._drive = None
-
-    def pull(self, k: Kinematics) -> np.ndarray:
-        """The rope's pull over K_H: the hoist current less its sensors' offset
-        (``pull_offset_a``), times the pull per ampere at each row's field relative to
-        the nominal field's (``pull_ratios`` on the hoist drive's curve). Without them,
-        the current as measured at the nominal field's pull."""
-        i = k.i_h_est - float(self.hyper.get("pull_offset_a", 0.0))
-        ratios = self.hyper.get("pull_ratios")
-        if not ratios:
-            return i
-        if self._drive is None:
-            from shoveld.model.terms import HoistDrive
-
-            self._drive = HoistDrive(**{key: self.hyper[key] for key in self.PULL_KEYS
-                                        if key in self.hyper})
-        return i * (self._drive._basis(k) @ np.asarray(ratios, dtype=float))
 
     def columns(self, k: Kinematics) -> np.ndarray:
         g_th, g_d = _unit_hoist_dboom(k)
@@ -1023,13 +1038,19 @@ class GroundSlope(ExtensionTerm):
 
 
 @register_term
-class BoomSuspensionSpring(ExtensionTerm):
+class BoomSuspensionSpring(RopePull, ExtensionTerm):
     """The boom angle moves with the rope load (suspension ropes and boom stretch).
 
-    The boom point drops in proportion to the rope pull, K_H i_H: boom_true =
-    boom - sag i_H / I_ref. To first order the rope columns change by
-    -K_H sag (i_H^2 / I_ref) d(rope)/d(boom); the parameter is K_H_sag = K_H sag,
-    and sag (rad at the reference current I_ref) follows.
+    The boom point drops in proportion to the rope's pull, K_H p with p the pull over
+    K_H (``RopePull.pull``: the hoist current less its sensors' offset, at the pull per
+    ampere of the row's field): boom_true = boom - sag p / I_ref. To first order the
+    rope columns change by -K_H sag (p^2 / I_ref) d(rope)/d(boom); the parameter is
+    K_H_sag = K_H sag, and sag (rad at the reference current I_ref at the nominal
+    field) follows. With the current as read in place of p, the thesis's machine, its
+    lowering strokes at a 30 A field, gave 0.58 deg for a simulated 2.45 (the weak
+    field's amperes sag the boom as much as the nominal field's in the term, not in the
+    machine), and 2.51 once its lowering field was nominal (docs/diagnosis.md,
+    nineteenth session).
     """
 
     name = "boom_suspension_spring"
@@ -1045,7 +1066,8 @@ class BoomSuspensionSpring(ExtensionTerm):
 
     def columns(self, k: Kinematics) -> np.ndarray:
         g_th, g_d = _unit_hoist_dboom(k)
-        q = -k.i_h_est**2 / self.h("ref_a")
+        p = self.pull(k)
+        q = -p * p / self.h("ref_a")
         return _stack((q * g_th, q * g_d))
 
     def derived(self, values: dict[str, float]) -> dict[str, float]:
