@@ -406,6 +406,17 @@ def test_every_model_error_belongs_to_a_value_the_term_reports(name: str) -> Non
         assert f["std"] == pytest.approx(math.hypot(f["std_fit"], m))
 
 
+def test_the_boom_drops_model_error_grows_with_the_reference_current() -> None:
+    """The boom's drop is reported at the term's reference current; its model error,
+    measured at 500 A, is a drop too: at 1,000 A it is twice as large."""
+    at_500, at_1000 = TERMS["boom_suspension_spring"](), TERMS["boom_suspension_spring"](
+        ref_a=1000.0)
+    (w500, _, _), = at_500.quantities()
+    (w1000, _, _), = at_1000.quantities()
+    assert w1000 != w500 and at_500.error_of(w500) > 0
+    assert at_1000.error_of(w1000) == pytest.approx(2 * at_500.error_of(w500))
+
+
 def test_params_file_records_terms_and_hyper(tmp_path) -> None:
     model = Model.from_names(["sensor_time_skew", "swing_centrifugal"],
                              {"sensor_time_skew": {"delay_s": 0.08},
