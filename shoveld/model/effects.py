@@ -1047,9 +1047,10 @@ class BoomSuspensionSpring(RopePull, ExtensionTerm):
     rope columns change by -K_H sag (p^2 / I_ref) d(rope)/d(boom); the parameter is
     K_H_sag = K_H sag, and sag (rad at the reference current I_ref at the nominal
     field) follows. With the current as read in place of p, the thesis's machine, its
-    lowering strokes at a 30 A field, gave 0.58 deg for a simulated 2.45 (the weak
+    lowering strokes at a 30 A field, gave 0.58 deg for a simulated 2.45 (the
+    diagnosis's output-error fit; 0.62 in ``test_physics``'s plain one): the weak
     field's amperes sag the boom as much as the nominal field's in the term, not in the
-    machine), and 2.51 once its lowering field was nominal (docs/diagnosis.md,
+    machine; and 2.51 once its lowering field was nominal (docs/diagnosis.md,
     nineteenth session).
     """
 
