@@ -81,8 +81,7 @@ def truths(name: str, magnitude: float, machine: Any, params: Any) -> dict[str, 
 
         # magnitude: degrees at 1 MN; the rope pull per measured ampere at the nominal field
         ref = BoomSuspensionSpring.defaults["ref_a"]
-        nominal = float(params.hyper.get("hoist_drive", {}).get("field_nominal_a", 70.0))
-        return {"boom point drop": magnitude * machine.k_h_at(nominal) * ref / 1e6}
+        return {"boom point drop": magnitude * machine.k_h_nominal(params) * ref / 1e6}
     raise ValueError(f"no truth for {name!r}")
 
 

@@ -331,7 +331,7 @@ class Calibrator:
         if any(a is not b for a, b in zip(terms, self.model.terms, strict=True)):
             self.model = Model(terms)
         for t in self.model.terms:
-            # A term with a nonlinear constant (a delay, a radius, the slope's rope pull)
+            # A term with a nonlinear constant (a delay, a radius, the rope's pull)
             # finds it first by fits of this same calibrator (shoveld.model.effects).
             search = getattr(t, "search_hyper", None)
             if search is not None:

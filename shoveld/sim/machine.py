@@ -238,13 +238,18 @@ class Machine:
         from shoveld.model.terms import field_knot_a
 
         tr = self.identified_truth()
-        nominal = float(params.hyper.get("hoist_drive", {}).get("field_nominal_a", 70.0))
         out = {}
         for n in params.names:
             knot = field_knot_a(n)
-            out[n] = (self.k_h_at(nominal) if n == "K_H" else
+            out[n] = (self.k_h_nominal(params) if n == "K_H" else
                       self.k_h_at(knot) if knot is not None else tr[n])
         return out
+
+    def k_h_nominal(self, params: ModelParams) -> float:
+        """True pull per measured ampere at the nominal field of ``params``' hoist drive
+        (its K_H's)."""
+        return self.k_h_at(float(params.hyper.get("hoist_drive", {}).get("field_nominal_a",
+                                                                          70.0)))
 
     def k_h_at(self, field_measured_a: float) -> float:
         """True pull per measured ampere at a *measured* hoist field current."""

@@ -225,21 +225,27 @@ def test_the_slope_moves_the_sheave_by_the_decks_lean_in_the_arm_plane_exactly()
     assert np.abs(first - want).max() > 1e-3 * np.abs(want).max()
 
 
-def _slope_on_trials(machine: Any, degrees: float, seed: int, form: str = "test"
-                     ) -> tuple[ModelParams, float, float]:
-    """Base + slope identified on empty and 8,420 kg trials (seeds ``seed`` and
-    ``seed + 1``) on ``machine`` standing on a slope: the params, kappa and its standard
-    error."""
+def _on_trials(machine: Any, effect: str, magnitude: float, seed: int, param: str,
+               form: str = "test") -> tuple[ModelParams, float, float]:
+    """Base + ``effect`` identified on empty and 8,420 kg trials (seeds ``seed`` and
+    ``seed + 1``) on ``machine`` with the effect at ``magnitude``: the params, and the
+    term's parameter ``param`` over K_H with its standard error."""
     from shoveld.identify.calibrate import Calibrator
     from shoveld.sim.scenario import simulate_calibration
 
     trials = [simulate_calibration(load, seed + i, machine=machine,
-                                   effects=make_effects({"ground_slope": degrees}, form=form)
+                                   effects=make_effects({effect: magnitude}, form=form)
                                    ).table for i, load in enumerate((0.0, 8420.0))]
-    p = Calibrator(Model.from_names(["ground_slope"])).fit(trials).params_
+    p = Calibrator(Model.from_names([effect])).fit(trials).params_
     assert p is not None
     k_h = p.get("K_H")
-    return p, p.get("K_H_pitch") / k_h, float(p.stderr[p.names.index("K_H_pitch")]) / k_h
+    return p, p.get(param) / k_h, float(p.stderr[p.names.index(param)]) / k_h
+
+
+def _slope_on_trials(machine: Any, degrees: float, seed: int, form: str = "test"
+                     ) -> tuple[ModelParams, float, float]:
+    """The slope's params, kappa and its standard error (``_on_trials``)."""
+    return _on_trials(machine, "ground_slope", degrees, seed, "K_H_pitch", form)
 
 
 def test_a_machine_on_a_steep_slope_gives_kappa_one() -> None:
@@ -279,19 +285,10 @@ def test_the_slope_pulls_with_the_current_at_the_field_less_the_sensors_offset(
 
 
 def _boom_drop_on_trials(machine: Any, degrees: float, seed: int) -> tuple[float, float]:
-    """Base + boom spring identified on empty and 8,420 kg trials (seeds ``seed`` and
-    ``seed + 1``) on ``machine`` whose boom drops ``degrees`` at 1 MN: the drop at the
-    term's reference current (deg) and its standard error."""
-    from shoveld.identify.calibrate import Calibrator
-    from shoveld.sim.scenario import simulate_calibration
-
-    trials = [simulate_calibration(load, seed + i, machine=machine, effects=make_effects(
-        {"boom_suspension_spring": degrees})).table for i, load in enumerate((0.0, 8420.0))]
-    p = Calibrator(Model.from_names(["boom_suspension_spring"])).fit(trials).params_
-    assert p is not None
-    k_h = p.get("K_H")
-    return (math.degrees(p.get("K_H_sag") / k_h),
-            math.degrees(float(p.stderr[p.names.index("K_H_sag")]) / k_h))
+    """The boom's drop at the term's reference current (deg) and its standard error, on
+    trials whose boom drops ``degrees`` at 1 MN (``_on_trials``)."""
+    _, sag, sag_se = _on_trials(machine, "boom_suspension_spring", degrees, seed, "K_H_sag")
+    return math.degrees(sag), math.degrees(sag_se)
 
 
 def test_the_boom_sags_with_the_pull_whatever_field_the_lowering_strokes_run_at() -> None:
