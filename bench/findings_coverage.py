@@ -19,12 +19,10 @@ the truth:
   simulated coefficient on a 0.5 m bearing radius; the saddle block's depends on the
   handle's angle in the simulator, so it has no single truth);
 * ``boom_suspension_spring``: the boom point's drop at the term's reference hoist current
-  (500 A as measured): the simulated drop at the rope pull that current gives at the
-  nominal field, with the dipper where the simulator's magnitude is defined (th = 0,
-  d = 8.5 m). The simulated drop per newton follows the moment of the two rope pulls
-  about the boom foot, which over the lift and swing samples of three drawn machines
-  lies within 0.80-1.12 of that pose's (5th-95th percentile): the term's one drop per
-  ampere is the pose-averaged one, and its truth here is the reference pose's.
+  (500 A as measured) and pose (the handle level, the bail 8.5 m out, where the
+  simulator's magnitude is defined): the simulated drop at the rope pull that current
+  gives at the nominal field. The simulated drop per newton follows the moment of both
+  rope pulls about the boom foot, the term's the bail rope's alone.
 
 Prints per value the error (mean +- sd), the reported standard deviation (median), how
 often the truth lies within one and two of them and the RMS of error over standard

@@ -284,30 +284,35 @@ def test_the_slope_pulls_with_the_current_at_the_field_less_the_sensors_offset(
     assert h["pull_ratios"][0] == pytest.approx(v[f"K_H_f{low:g}"] / v["K_H"], rel=0.02)
 
 
-def _boom_drop_on_trials(machine: Any, degrees: float, seed: int) -> tuple[float, float]:
-    """The boom's drop at the term's reference current (deg) and its standard error, on
-    trials whose boom drops ``degrees`` at 1 MN (``_on_trials``)."""
-    _, sag, sag_se = _on_trials(machine, "boom_suspension_spring", degrees, seed, "K_H_sag")
-    return math.degrees(sag), math.degrees(sag_se)
+def _boom_drop_on_trials(machine: Any, degrees: float, seed: int
+                         ) -> tuple[float, float, float]:
+    """The boom's drop at the term's reference current and pose (deg), its standard
+    error and the simulated truth, on trials whose boom drops ``degrees`` at 1 MN at
+    that pose (``_on_trials``): the drop at the pull the reference current gives at the
+    fit's nominal field."""
+    p, sag, sag_se = _on_trials(machine, "boom_suspension_spring", degrees, seed, "K_H_sag")
+    ref_a = TERMS["boom_suspension_spring"].defaults["ref_a"]
+    truth = degrees * machine.k_h_nominal(p) * ref_a / 1e6
+    return math.degrees(sag), math.degrees(sag_se), truth
 
 
-def test_the_boom_sags_with_the_pull_whatever_field_the_lowering_strokes_run_at() -> None:
-    """The thesis's machine, its boom dropping 2.86 deg at 1 MN of rope pull: the drop
-    identified on its trials is the same, within three standard errors and 5 %, whether
-    its lowering strokes run at a 30 A field (an ampere pulling 0.6 of the nominal
-    field's) or at the nominal one: 1.89 +- 0.21 and 1.95 +- 0.21 deg at 500 A. With the
-    current as read in place of the rope's pull the first was 0.62. (The simulated drop
-    at the reference pose is 2.45 deg, the rest is the pose: the term's drop per newton
-    is the same at every pose, the machine's follows the moment about the boom foot.)"""
+def test_the_boom_sags_with_the_pull_and_the_pose_whatever_field_lowering_runs_at() -> None:
+    """The thesis's machine, its boom dropping 2.86 deg at 1 MN of rope pull with the
+    handle level and the bail 8.5 m out (2.45 deg at 500 A): the drop identified on its
+    trials is that, within three standard errors and 10 %, whether its lowering strokes
+    run at a 30 A field (an ampere pulling 0.6 of the nominal field's) or at the nominal
+    one: 2.46 +- 0.22 and 2.49 +- 0.22 deg. With the current as read in place of the
+    rope's pull the first was 0.62; with the pull, but one drop per newton at every pose
+    (the machine's follows the bail rope's moment about the boom foot), 1.89 +- 0.21 and
+    1.95 +- 0.21."""
     from shoveld.sim.machine import Machine
 
     thesis = Machine.ideal()
     nominal = dataclasses.replace(thesis, plant=dataclasses.replace(
         thesis.plant, hoist_field_lowering_a=thesis.plant.hoist_field_hoisting_a))
-    weak, weak_se = _boom_drop_on_trials(thesis, 2.861, 5_000_001)
-    even, even_se = _boom_drop_on_trials(nominal, 2.861, 5_000_001)
-    assert abs(weak - even) < min(3 * math.hypot(weak_se, even_se), 0.05 * even), (
-        weak, weak_se, even, even_se)
+    for machine in (thesis, nominal):
+        drop, se, truth = _boom_drop_on_trials(machine, 2.861, 5_000_001)
+        assert abs(drop - truth) < min(3 * se, 0.10 * truth), (drop, se, truth)
 
 
 def test_the_swing_radius_is_found_where_the_trials_do_not_swing() -> None:
