@@ -1085,7 +1085,7 @@ class BoomSuspensionSpring(RopePull, ExtensionTerm):
         return _stack((q * g_th, q * g_d))
 
     def derived(self, values: dict[str, float]) -> dict[str, float]:
-        return {"boom drop at the reference current, deg":
+        return {"boom drop at the reference current and pose, deg":
                 math.degrees(values["K_H_sag"] / values["K_H"])}
 
     def _drop(self) -> str:
@@ -1097,7 +1097,8 @@ class BoomSuspensionSpring(RopePull, ExtensionTerm):
     # the bail rope's moment (``_bail_share``): 1.03 +- 0.06, the RMS of error over the
     # fit's own std 1.15, one with 0.056 deg at 500 A; on 20 others 0.80 with the fit's
     # std alone (bench/findings_coverage.py, seed offsets 5000 and 9000; twentieth
-    # session). Scaled with the reference current (``error_of``).
+    # session). What is left grows with the drop (+1 % at 1 deg per MN, +4 % at 3): the
+    # columns are first-order in the sag. Scaled with the reference current (``error_of``).
     model_error: ClassVar[dict[str, float]] = {
         "boom point drop at 500 A of hoist current, the bail 8.5 m out at 0 deg": 0.056}
 
