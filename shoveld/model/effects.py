@@ -1064,9 +1064,25 @@ class BoomSuspensionSpring(RopePull, ExtensionTerm):
     cause = ("the boom suspension ropes stretch under the hoist pull, so the boom point "
              "(and the rope angle) moves with the load")
     signature = "hoist_current"
-    defaults = {"ref_a": 500.0, "ref_th_deg": 0.0, "ref_d_m": 8.5}
+    defaults = {"ref_a": 500.0, "ref_th_deg": 0.0, "ref_d_m": 8.5, "moment": "bail"}
     static_params = ("K_H_sag",)
     bounds = {"K_H_sag": (0.0, math.inf)}  # the boom point drops under the pull, never rises
+
+    def __init__(self, **hyper: Any) -> None:
+        super().__init__(**hyper)
+        if self.hyper["moment"] not in ("bail", "none"):
+            raise ValueError(f"hyper.{self.name}.moment: expected 'bail' or 'none', got "
+                             f"{self.hyper['moment']!r}")
+        if not 0.0 < self.h("ref_d_m") <= 12.0 or not -60.0 <= self.h("ref_th_deg") <= 30.0:
+            raise ValueError(f"hyper.{self.name}: expected the reference pose's ref_d_m in "
+                             "(0, 12] m and ref_th_deg in [-60, 30] deg (below the boom), got "
+                             f"{self.h('ref_d_m'):g} m and {self.h('ref_th_deg'):g} deg")
+
+    @classmethod
+    def file_hyper(cls, hyper: dict[str, Any]) -> dict[str, Any]:
+        """A params file without ``moment`` was identified with one drop per newton at
+        every pose (before the twentieth session): "none" keeps that form."""
+        return hyper if "moment" in hyper else {**hyper, "moment": "none"}
 
     def _bail_share(self, k: Kinematics) -> np.ndarray:
         """The bail rope's moment per newton about the boom foot at each row over the
@@ -1081,15 +1097,22 @@ class BoomSuspensionSpring(RopePull, ExtensionTerm):
     def columns(self, k: Kinematics) -> np.ndarray:
         g_th, g_d = _unit_hoist_dboom(k)
         p = self.pull(k)
-        q = -p * p * self._bail_share(k) / self.h("ref_a")
+        q = -p * p / self.h("ref_a")
+        if self.hyper["moment"] == "bail":
+            q = q * self._bail_share(k)
         return _stack((q * g_th, q * g_d))
 
     def derived(self, values: dict[str, float]) -> dict[str, float]:
         return {"boom drop at the reference current and pose, deg":
                 math.degrees(values["K_H_sag"] / values["K_H"])}
 
-    def _drop(self) -> str:
-        return (f"boom point drop at {self.h('ref_a'):g} A of hoist current, the bail "
+    def _drop(self, ref_a: float | None = None) -> str:
+        """The value's wording at ``ref_a`` (the term's reference current by default): at
+        the reference pose, or, in the form of one drop per newton, at none."""
+        a = self.h("ref_a") if ref_a is None else ref_a
+        if self.hyper["moment"] == "none":
+            return f"boom point drop at {a:g} A of hoist current"
+        return (f"boom point drop at {a:g} A of hoist current, the bail "
                 f"{self.h('ref_d_m'):g} m out at {self.h('ref_th_deg'):g} deg")
 
     # With one drop per newton at every pose the value was the pose-averaged one, 0.84 +-
@@ -1098,9 +1121,13 @@ class BoomSuspensionSpring(RopePull, ExtensionTerm):
     # fit's own std 1.15, one with 0.056 deg at 500 A; on 20 others 0.80 with the fit's
     # std alone (bench/findings_coverage.py, seed offsets 5000 and 9000; twentieth
     # session). What is left grows with the drop (+1 % at 1 deg per MN, +4 % at 3): the
-    # columns are first-order in the sag. Scaled with the reference current (``error_of``).
+    # columns are first-order in the sag. Scaled with the reference current (``error_of``);
+    # the bail rope's at any reference pose.
     model_error: ClassVar[dict[str, float]] = {
         "boom point drop at 500 A of hoist current, the bail 8.5 m out at 0 deg": 0.056}
+    flat_model_error: ClassVar[float] = 0.36
+    """The drop's model error at 500 A in the form of one drop per newton at every pose
+    (``moment = "none"``: params files written before the twentieth session)."""
 
     def quantities(self) -> list[tuple[str, str, Callable[[dict[str, float]], float]]]:
         return [(self._drop(), "deg", lambda v: math.degrees(v["K_H_sag"] / v["K_H"]))]
@@ -1108,8 +1135,9 @@ class BoomSuspensionSpring(RopePull, ExtensionTerm):
     def error_of(self, what: str) -> float:
         """The drop's model error at the term's reference current (it grows with it)."""
         if what == self._drop():
-            (at_500,) = self.model_error.values()
-            return at_500 * self.h("ref_a") / 500.0
+            (bail,) = self.model_error.values()
+            flat = self.hyper["moment"] == "none"
+            return (self.flat_model_error if flat else bail) * self.h("ref_a") / 500.0
         return super().error_of(what)
 
 

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from shoveld.model.model import EQUATIONS, Model
+from shoveld.model.terms import TERMS
 
 PARAMS_FORMAT = "shoveld-params/1"
 
@@ -144,6 +145,8 @@ def load_params(path: str | Path) -> ModelParams:
     if not isinstance(hyper, dict) or not all(isinstance(v, dict) for v in hyper.values()):
         raise ParamsFileError(f"{spath}: key 'hyper' must be a table of tables (one per term)")
     try:
+        # each term's keys as they were before a file carried them (its form then)
+        hyper = {n: (TERMS[n].file_hyper(h) if n in TERMS else h) for n, h in hyper.items()}
         model = Model.from_names(terms, hyper)
     except ValueError as e:
         where = "" if str(e).startswith("hyper.") else "key 'terms': "

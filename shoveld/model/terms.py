@@ -67,6 +67,12 @@ class Term:
     def __init__(self, **hyper: Any) -> None:
         self.hyper: dict[str, Any] = dict(hyper)
 
+    @classmethod
+    def file_hyper(cls, hyper: dict[str, Any]) -> dict[str, Any]:
+        """The hyper-parameters a params file gives, with the value a key had before it
+        was written (the term's form when the file was identified): as given here."""
+        return hyper
+
     def columns(self, k: Kinematics) -> np.ndarray:
         """(N, 2, P): residual of [th, d] equations per unit of each parameter."""
         raise NotImplementedError

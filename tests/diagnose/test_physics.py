@@ -439,6 +439,51 @@ def test_params_file_records_terms_and_hyper(tmp_path) -> None:
     assert np.allclose(m2.regressor(k)[0], model.regressor(k)[0])
 
 
+def test_a_boom_identified_before_the_pose_keeps_its_form_and_a_bad_pose_is_refused(
+        tmp_path) -> None:
+    """A params file whose boom term has no ``moment`` (written before the twentieth
+    session) was identified with one drop per newton at every pose: it loads in that
+    form (its columns those of ``moment = "none"``, its value worded without a pose and
+    with that form's model error), while a new file keeps the bail rope's moment; an
+    unknown form or an impossible reference pose is refused with a line naming the file
+    and the key."""
+    from shoveld.model.params import ParamsFileError
+
+    k = _kin()
+    k = dataclasses.replace(k, i_h_est=np.linspace(-900.0, 900.0, len(k)))
+    pose = Model.from_names(["boom_suspension_spring"])
+    n = len(pose.param_names)
+
+    def written(hyper: dict[str, Any]) -> Any:
+        p = ModelParams(terms=pose.term_names, names=pose.param_names,
+                        values=np.arange(1.0, n + 1), stderr=np.full(n, 0.1),
+                        cov=np.eye(n) * 0.01, noise={"handle": 1.0, "crowd": 1.0},
+                        hyper={"boom_suspension_spring": hyper})
+        save_params(tmp_path / "x.toml", p)
+        return load_params(tmp_path / "x.toml")
+
+    new = written(dict(pose.terms[-1].hyper)).model()
+    assert np.array_equal(new.regressor(k)[0], pose.regressor(k)[0])
+    old = written({"ref_a": 500.0}).model()
+    flat = Model.from_names(["boom_suspension_spring"], {"boom_suspension_spring":
+                                                        {"moment": "none"}})
+    assert np.array_equal(old.regressor(k)[0], flat.regressor(k)[0])
+    assert not np.allclose(old.regressor(k)[0], new.regressor(k)[0])
+    (what, _, _), = old.terms[-1].quantities()
+    assert what == "boom point drop at 500 A of hoist current"
+    assert old.terms[-1].error_of(what) == 0.36
+    written(dict(pose.terms[-1].hyper))
+    text = (tmp_path / "x.toml").read_text()
+    for good, bad, key in (('moment = "bail"', 'moment = "up"',
+                            "moment: expected 'bail' or 'none'"),
+                           ("ref_d_m = 8.5", "ref_d_m = 0.0", "ref_d_m in")):
+        assert good in text
+        (tmp_path / "y.toml").write_text(text.replace(good, bad))
+        with pytest.raises(ParamsFileError, match=rf"y\.toml: hyper\.boom_suspension_spring"
+                                                  rf"\.?.*{key}"):
+            load_params(tmp_path / "y.toml")
+
+
 def test_the_saturation_knee_sits_at_the_median_hoist_current_and_bends_the_pull() -> None:
     """The knee is a spline knot placed at the median of the data's hoist current (not
     searched on the residual); below it the term adds nothing, above it it takes a
