@@ -1106,10 +1106,10 @@ class BoomSuspensionSpring(RopePull, ExtensionTerm):
         return {"boom drop at the reference current and pose, deg":
                 math.degrees(values["K_H_sag"] / values["K_H"])}
 
-    def _drop(self, ref_a: float | None = None) -> str:
-        """The value's wording at ``ref_a`` (the term's reference current by default): at
-        the reference pose, or, in the form of one drop per newton, at none."""
-        a = self.h("ref_a") if ref_a is None else ref_a
+    def _drop(self) -> str:
+        """The value's wording: at the reference current and pose, or, in the form of one
+        drop per newton, at no pose."""
+        a = self.h("ref_a")
         if self.hyper["moment"] == "none":
             return f"boom point drop at {a:g} A of hoist current"
         return (f"boom point drop at {a:g} A of hoist current, the bail "
@@ -1121,8 +1121,8 @@ class BoomSuspensionSpring(RopePull, ExtensionTerm):
     # fit's own std 1.15, one with 0.056 deg at 500 A; on 20 others 0.80 with the fit's
     # std alone (bench/findings_coverage.py, seed offsets 5000 and 9000; twentieth
     # session). What is left grows with the drop (+1 % at 1 deg per MN, +4 % at 3): the
-    # columns are first-order in the sag. Scaled with the reference current (``error_of``);
-    # the bail rope's at any reference pose.
+    # columns are first-order in the sag. Scaled with the reference current, the same at
+    # any reference pose (``error_of``).
     model_error: ClassVar[dict[str, float]] = {
         "boom point drop at 500 A of hoist current, the bail 8.5 m out at 0 deg": 0.056}
     flat_model_error: ClassVar[float] = 0.36
