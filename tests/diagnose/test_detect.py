@@ -19,10 +19,19 @@ from tests.diagnose.conftest import draw, session
 # Known misses on the realistic machine, measured (docs/diagnosis.md, "What is weak"):
 # not strict, because each sits near a threshold and another machine's arithmetic may
 # tip it either way.
-KNOWN_MISSES: dict[str, str] = {}
-"""None since 2026-11-27: the time skew (the delay model takes 26 % of the held-out
-residual and cuts the payload RMS from 162 to 98 kg over 14 passes, where the paired
-payload tests sat at their p < 0.025 threshold) is named by ``decisive_gain``."""
+KNOWN_MISSES: dict[str, str] = {
+    "boom_suspension_spring":
+        "1.6 deg at 1 MN on this machine (seed 75611) moves the payload by about 20 kg "
+        "(base RMS 69 kg against 66 kg on a clean machine; the issue's size is 175 kg): "
+        "since the term's column follows the bail rope's moment its held-out t is 2.95, "
+        "under 3.39 (3.47 before), though it takes more of the residual (3.0 % against "
+        "2.8 %) and cuts the payload RMS further (69 -> 40 kg against 42 kg)"}
+"""The time skew's miss is gone since 2026-11-27 (the delay model takes 26 % of the
+held-out residual and cuts the payload RMS from 162 to 98 kg over 14 passes, where the
+paired payload tests sat at their p < 0.025 threshold): it is named by
+``decisive_gain``. The boom spring's here came with its pose (twentieth session,
+docs/diagnosis.md): on the bench's machines its t fell a little too (5.19, 3.46, 5.03
+-> 4.47, 3.22, 4.86) while it was named on 2 of 3 (1 before)."""
 
 
 @pytest.mark.parametrize("effect", [
