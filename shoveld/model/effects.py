@@ -1086,13 +1086,14 @@ class BoomSuspensionSpring(RopePull, ExtensionTerm):
 
     def _bail_share(self, k: Kinematics) -> np.ndarray:
         """The bail rope's moment per newton about the boom foot at each row over the
-        reference pose's: d sin(boom - th) / l_SD each (the foot lies on the boom line,
-        so the arm's length cancels), both at the row's boom angle."""
-        th0, d0 = math.radians(self.h("ref_th_deg")), self.h("ref_d_m")
-        rx = L_BS * np.cos(k.boom) - d0 * math.cos(th0)
-        ry = L_BS * np.sin(k.boom) - d0 * math.sin(th0)
-        at_ref = d0 * np.sin(k.boom - th0) / np.hypot(rx, ry)
-        return k.d * np.sin(k.boom - k.th) / k.l_sd / at_ref
+        reference pose's, both at the row's boom angle. It is d sin(boom - th) / l_SD
+        times the foot-to-sheave length (the foot lies on the boom line), and by the
+        law of sines d sin(boom - th) / l_SD = d sin(a3) / L_BS: the ratio is that of
+        the rope's handle torques per newton, d sin(a3) (``rope_geometry``)."""
+        d0 = self.h("ref_d_m")
+        _, sin_ref, _ = rope_geometry(np.full_like(k.boom, math.radians(self.h("ref_th_deg"))),
+                                      np.full_like(k.boom, d0), k.boom)
+        return (k.d * k.sin_a3) / (d0 * sin_ref)
 
     def columns(self, k: Kinematics) -> np.ndarray:
         g_th, g_d = _unit_hoist_dboom(k)
