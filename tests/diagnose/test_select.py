@@ -6,8 +6,9 @@ two candidates that fail alone (the payload test, or significance) are added tog
 when the pair pays, a decisive one that fails the payload test is tried beside every
 other, a candidate that adds nothing beside the other is not brought in as a passenger,
 a term the trials cannot identify is identified with the passes, a term the residual
-cannot see is named on the payload or on a value that holds beside the earlier models,
-and one whose physics comes out impossible is neither named nor paired.
+cannot see is named on the payload or on a value that holds beside the earlier models
+and is ranked against a share of the residual on the payload, and one whose physics
+comes out impossible is neither named nor paired.
 """
 
 from __future__ import annotations
@@ -519,3 +520,53 @@ def test_beside_a_confirmed_cause_a_term_impossible_alone_is_tried() -> None:
         names = [p.name for p in pairs]
         assert ("ground_slope+hoist_rope_mass" in names) is tried, names
         assert (best is not None and best.name == "ground_slope+hoist_rope_mass") is tried
+
+
+def test_a_term_the_residual_cannot_see_is_ranked_beside_a_share_on_the_payload(
+        monkeypatch: Any) -> None:
+    """Beside the saturation the boom's term took 2.4 % of the residual, significant, and
+    the friction the saturation masks none, named on the payload (292 against 232 kg):
+    the share cannot rank a term the residual cannot see, so the lower held-out payload
+    RMS is added first; a larger share is still first where its payload is the lower,
+    and a cause its physics confirms first whatever its payload."""
+    import shoveld.diagnose.select as select
+
+    spread = np.where(np.arange(N) % 2 == 0, 0.9, 1.1)   # no share, within its spread
+    boom = model(0.97, 220.0)
+    boom.final = SimpleNamespace(names=["Md", "K_H_sag"], values=np.array([55_000.0, 40.0]),
+                                 stderr=np.array([300.0, 4.0]))
+
+    def friction(err_kg: float) -> Any:
+        m = per_pass(spread, err_kg)
+        m.final = SimpleNamespace(names=["Md", "fc3_kg", "fc4_kg"],
+                                  values=np.array([55_000.0, 0.8, 0.6]),
+                                  stderr=np.array([300.0, 0.12, 0.03]))
+        m.effects = ["current_saturation", "load_dependent_friction"]
+        return m
+
+    library = ["boom_suspension_spring", "load_dependent_friction"]
+    for err_kg, first in ((200.0, "load_dependent_friction"),
+                          (260.0, "boom_suspension_spring")):
+        made = {(): model(1.0, 300.0), ("boom_suspension_spring",): boom,
+                ("load_dependent_friction",): friction(err_kg)}
+
+        def evaluate(dataset: Any, effects: list[str], *args: Any, made: Any = made,
+                     **kwargs: Any) -> Any:
+            return made[tuple(effects)]
+
+        monkeypatch.setattr(select, "evaluate", evaluate)
+        sel = select.forward_select(DATA, library, np.ones(2), [],
+                                    SelectionConfig(max_effects=1))
+        step = {c.name: c for c in sel.steps[0].candidates}
+        share, unseen = step["boom_suspension_spring"], step["load_dependent_friction"]
+        assert share.significant and share.witness == "residual", share
+        assert unseen.significant and unseen.witness == "payload", unseen
+        assert unseen.gain < share.gain
+        assert sel.found == [first], (err_kg, step)
+    share.confirmed = True
+    made[("load_dependent_friction",)] = friction(200.0)
+    unseen = select.compare(DATA, made[()], made[("load_dependent_friction",)],
+                            "load_dependent_friction", 2, SelectionConfig())
+    assert unseen.payload_rms_kg < share.payload_rms_kg
+    assert select._first([share, unseen]) is share
+    assert select._first([]) is None
