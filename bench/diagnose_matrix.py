@@ -105,7 +105,7 @@ def one(job: dict[str, Any]) -> dict[str, Any]:
             "ext_rms": x.get("rms_kg", math.nan), "base_mean": b.get("mean_kg", math.nan),
             "ext_mean": x.get("mean_kg", math.nan), "sim_s": t1 - t0, "diag_s": t2 - t1,
             "scores": {c.name: round(c.gain, 4) for c in d.selection.steps[0].candidates},
-            "steps": [{"model": st.model, "chosen": st.chosen,
+            "steps": [{"model": st.model, "chosen": st.chosen, "removed": st.removed,
                        "candidates": [c.as_dict() for c in st.candidates],
                        "pairs": [c.as_dict() for c in st.pairs]}
                       for st in d.selection.steps]}

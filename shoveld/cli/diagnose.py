@@ -43,7 +43,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _summary(js: dict) -> str:
-    from shoveld.diagnose.report import added, candidate_verdict, finding_text
+    from shoveld.diagnose.report import added, candidate_verdict, finding_text, removals
 
     lines = []
     if js["found"]:
@@ -62,7 +62,7 @@ def _summary(js: dict) -> str:
         score = 100 * (c["score"] or 0.0)
         sc = f"{score:+7.1f}%" if abs(score) < 1000 else f"{'unstable':>8s}"
         lines.append(f"{c['name']:26s} {sc} {t:>7s} {c['t_crit']:6.2f}  "
-                     f"{candidate_verdict(c, js['found'])}")
+                     f"{candidate_verdict(c, js['found'], removals(js['steps']))}")
     for st in js["steps"]:
         for c in st.get("pairs", []):
             after = f" after {', '.join(st['model'])}" if st["model"] else ""

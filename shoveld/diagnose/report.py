@@ -60,8 +60,23 @@ def added(candidate: str, found: list[str]) -> bool:
     return all(n in found for n in candidate.split("+"))
 
 
-def candidate_verdict(c: dict[str, Any], found: list[str]) -> str:
-    """A ranked candidate's verdict in words: added (and on what), or why not."""
+def removals(steps: list[dict[str, Any]]) -> dict[str, str]:
+    """The terms a backward step removed (``select._backward``), each with why, in words."""
+    out = {}
+    for st in steps:
+        if (name := st.get("removed")) is not None:
+            c = next(c for c in st["candidates"] if c["name"] == name)
+            others = ", ".join(e for e in st["model"] if e != name)
+            out[name] = f"removed at the end, beside {others}: {c['why']}"
+    return out
+
+
+def candidate_verdict(c: dict[str, Any], found: list[str],
+                      removed: dict[str, str] | None = None) -> str:
+    """A ranked candidate's verdict in words: added (and on what), removed at the end
+    (``removals``), or why not."""
+    if removed and c["name"] in removed:
+        return removed[c["name"]]
     if added(c["name"], found):
         return {"payload": "added on the payload (the residual cannot see it)",
                 "agreement": "added: the residual cannot see it, its value holds beside the "
@@ -86,7 +101,7 @@ def as_json(d: Diagnosis) -> dict[str, Any]:
         "causes": {n: cause(n) for n in d.found},
         "physical": findings(d.extended_params, d.found),
         "ranked": [c.as_dict() for c in first],
-        "steps": [{"model": s.model, "chosen": s.chosen,
+        "steps": [{"model": s.model, "chosen": s.chosen, "removed": s.removed,
                    "candidates": [c.as_dict() for c in s.candidates],
                    "pairs": [c.as_dict() for c in s.pairs]} for s in sel.steps],
     }
@@ -135,7 +150,7 @@ def as_json(d: Diagnosis) -> dict[str, Any]:
                                        else None),
                      "same_data": cfg.same_data,
                      "blind_z": cfg.blind_z if math.isfinite(cfg.blind_z) else None,
-                     "agree_se": cfg.agree_se,
+                     "agree_se": cfg.agree_se, "backward": cfg.backward,
                      "test": "per-pass held-out loss differences, one-sided t, Bonferroni "
                              "over the candidates of a step"}
     out["timing_s"] = {k: round(v, 3) for k, v in d.timing.items()}
@@ -321,7 +336,7 @@ def write_report(d: Diagnosis, out_dir: str | Path) -> Path:
               "|---|---|---|---|---|"]
     pairs = js["steps"][0]["pairs"] if js["steps"] else []
     for c in js["ranked"] + pairs:
-        verdict = candidate_verdict(c, d.found)
+        verdict = candidate_verdict(c, d.found, removals(js["steps"]))
         if added(c["name"], d.found):
             verdict = f"**{verdict}**"
         score = 100 * (c["score"] or 0)
@@ -371,6 +386,9 @@ def write_report(d: Diagnosis, out_dir: str | Path) -> Path:
                     "look alike to the residual) is judged the same way, on the payload "
                     "whatever its share of the residual" if masked else "")
                  if math.isfinite(d.config.blind_z) else "")
-              + ". The search repeats until none qualifies."]
+              + ". The search repeats until none qualifies"
+              + ("; then each term found is judged again beside all the others, as if it "
+                 "came last, and one that no longer qualifies is removed" if d.config.backward
+                 else "") + "."]
     (out / "report.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
     return out / "report.md"

@@ -118,6 +118,13 @@ class SelectionConfig:
     light ones' noise held its plain t at 0.7-1.6. Over nine sets of pairs the true
     friction's t went from a median 4.2 to 7.3, an absent one's from 0.5 to 0.4
     (docs/diagnosis.md, fifteenth session)."""
+    backward: bool = True
+    """Once no candidate qualifies, each term found is judged again as if it came last:
+    against the model without it (``compare``, the family the model's terms), and the
+    least significant of those that no longer qualify is removed, the rest judged again
+    (``_backward``). A term added early can stand in for causes found after it: the cubic
+    saturation, named first on a rope + friction machine, for the friction it masks
+    (docs/diagnosis.md). False: forward steps only."""
     payload_tolerance: float = math.inf
     """If finite, a candidate may not raise the held-out payload RMS error by more than
     this many times the payload uncertainty its own calibration implies. Off by
@@ -169,6 +176,9 @@ class Step:
     chosen: str | None
     pairs: list[CandidateScore] = field(default_factory=list)
     """Pairs tried together where no candidate qualified alone (``_pair``)."""
+    removed: str | None = None
+    """A backward step (``_backward``): ``candidates`` are the model's terms judged each
+    beside the others, and this one no longer qualified and was removed."""
 
 
 @dataclass
@@ -614,4 +624,30 @@ def forward_select(dataset: DataSet, library: list[str], sigma0: np.ndarray,
         if not added:
             break
         current = [*current, *added]
+    while cfg.backward and len(current) >= 2:
+        step = _backward(dataset, current, cfg, ev, fitted_before)
+        steps.append(step)
+        if step.removed is None:
+            break
+        current = [e for e in current if e != step.removed]
     return Selection(list(current), steps, base, ev(current), cache)
+
+
+def _backward(dataset: DataSet, current: list[str], cfg: SelectionConfig,
+              ev: Callable[..., Evaluation], fitted_before: Callable[[str], list[Evaluation]]
+              ) -> Step:
+    """Each of ``current``'s terms judged beside all the others, as a last step would judge
+    it (against the model without it, on the same data: ``_reference``); the least
+    significant of those that no longer qualify is the step's ``removed``. The Bonferroni
+    family is the model's terms, fewer than a forward step's candidates, so a term stays
+    more easily than it came in (stepwise selection's usual asymmetry: no term goes in and
+    out by the same margin)."""
+    full = ev(current)
+    verdicts = []
+    for c in current:
+        rest = [e for e in current if e != c]
+        ref = _reference(cfg, full, ev(rest), lambda r=rest: ev(r, folds=True))
+        verdicts.append(compare(dataset, ref, full, c, len(current), cfg, fitted_before(c)))
+    out = [v for v in verdicts if not v.significant]
+    removed = min(out, key=lambda v: v.t if math.isfinite(v.t) else -math.inf) if out else None
+    return Step(list(current), verdicts, None, removed=removed.name if removed else None)

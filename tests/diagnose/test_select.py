@@ -570,3 +570,33 @@ def test_a_term_the_residual_cannot_see_is_ranked_beside_a_share_on_the_payload(
     assert unseen.payload_rms_kg < share.payload_rms_kg
     assert select._first([share, unseen]) is share
     assert select._first([]) is None
+
+
+def test_a_term_the_later_ones_explain_is_removed_at_the_end(monkeypatch: Any) -> None:
+    """On a rope + friction machine the cubic saturation, named first (it stands in for
+    both), took 1.1 % of the residual beside the two found after it. Once no candidate
+    qualifies, each term is judged again as if it came last, and one that no longer
+    qualifies is removed and said so; without the backward step it stays."""
+    import shoveld.diagnose.select as select
+    from shoveld.diagnose.report import removals
+
+    made = {(): model(1.0, 300.0), ("a",): model(0.90, 200.0), ("b",): model(0.93, 200.0),
+            ("c",): model(0.95, 250.0), ("a", "b"): model(0.85, 150.0),
+            ("a", "c"): model(0.88, 180.0), ("b", "c"): model(0.805, 72.0),
+            ("a", "b", "c"): model(0.80, 70.0)}
+
+    def evaluate(dataset: Any, effects: list[str], *args: Any, **kwargs: Any) -> Any:
+        return made[tuple(sorted(effects))]
+
+    monkeypatch.setattr(select, "evaluate", evaluate)
+    for backward, found in ((True, ["b", "c"]), (False, ["a", "b", "c"])):
+        sel = select.forward_select(DATA, ["a", "b", "c"], np.ones(2), [],
+                                    SelectionConfig(backward=backward))
+        assert sel.found == found, [(s.model, s.chosen, s.removed) for s in sel.steps]
+        assert [s.chosen for s in sel.steps[:3]] == ["a", "b", "c"]
+        assert sel.extended is made[tuple(found)]
+    gone = removals([{"model": s.model, "removed": s.removed,
+                      "candidates": [c.as_dict() for c in s.candidates]}
+                     for s in select.forward_select(DATA, ["a", "b", "c"], np.ones(2), [],
+                                                    SelectionConfig()).steps])
+    assert list(gone) == ["a"] and gone["a"].startswith("removed at the end, beside b, c: ")
