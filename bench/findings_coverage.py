@@ -76,10 +76,12 @@ def truths(name: str, magnitude: float, machine: Any, params: Any) -> dict[str, 
         return {"shipper-shaft friction per tonne": 1000.0 * magnitude * e.shaft_radius_m * 9.81}
     if name == "boom_suspension_spring":
         from shoveld.model.effects import BoomSuspensionSpring
+        from shoveld.sim.effects import BoomSuspensionSpringEffect
 
-        # magnitude: degrees at 1 MN; the rope pull per measured ampere at the nominal field
+        # the pull of the term's reference current at the fit's nominal field
         ref = BoomSuspensionSpring.defaults["ref_a"]
-        return {"boom point drop": magnitude * machine.k_h_nominal(params) * ref / 1e6}
+        return {"boom point drop": BoomSuspensionSpringEffect(magnitude).drop_deg_at(
+            machine.k_h_nominal(params) * ref)}
     raise ValueError(f"no truth for {name!r}")
 
 

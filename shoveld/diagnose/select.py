@@ -624,8 +624,15 @@ def forward_select(dataset: DataSet, library: list[str], sigma0: np.ndarray,
         if not added:
             break
         current = [*current, *added]
+    # A forward step's verdict on its term is already the backward one while the model
+    # around it is the same; the earlier models' fits as the forward steps saw them (a
+    # backward step's own fits, a reduced model on the folds, are not an earlier model).
+    forward = {(frozenset(st.model), st.chosen): next(c for c in st.candidates
+                                                      if c.name == st.chosen)
+               for st in steps if st.chosen and "+" not in st.chosen}
+    before = {c: fitted_before(c) for c in current}
     while cfg.backward and len(current) >= 2:
-        step = _backward(dataset, current, cfg, ev, fitted_before)
+        step = _backward(dataset, current, cfg, ev, before, forward)
         steps.append(step)
         if step.removed is None:
             break
@@ -634,20 +641,25 @@ def forward_select(dataset: DataSet, library: list[str], sigma0: np.ndarray,
 
 
 def _backward(dataset: DataSet, current: list[str], cfg: SelectionConfig,
-              ev: Callable[..., Evaluation], fitted_before: Callable[[str], list[Evaluation]]
-              ) -> Step:
+              ev: Callable[..., Evaluation], before: dict[str, list[Evaluation]],
+              forward: dict[tuple[frozenset[str], str], CandidateScore]) -> Step:
     """Each of ``current``'s terms judged beside all the others, as a last step would judge
     it (against the model without it, on the same data: ``_reference``); the least
     significant of those that no longer qualify is the step's ``removed``. The Bonferroni
     family is the model's terms, fewer than a forward step's candidates, so a term stays
     more easily than it came in (stepwise selection's usual asymmetry: no term goes in and
-    out by the same margin)."""
+    out by the same margin). A term a forward step added to the model without it keeps
+    that step's verdict (``forward``: the last one added is not fitted again); ``before``:
+    each term's fits beside the forward steps' models (``_agrees``)."""
     full = ev(current)
     verdicts = []
     for c in current:
         rest = [e for e in current if e != c]
+        if (done := forward.get((frozenset(rest), c))) is not None:
+            verdicts.append(done)
+            continue
         ref = _reference(cfg, full, ev(rest), lambda r=rest: ev(r, folds=True))
-        verdicts.append(compare(dataset, ref, full, c, len(current), cfg, fitted_before(c)))
+        verdicts.append(compare(dataset, ref, full, c, len(current), cfg, before[c]))
     out = [v for v in verdicts if not v.significant]
     removed = min(out, key=lambda v: v.t if math.isfinite(v.t) else -math.inf) if out else None
     return Step(list(current), verdicts, None, removed=removed.name if removed else None)

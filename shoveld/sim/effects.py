@@ -558,6 +558,12 @@ class BoomSuspensionSpringEffect(SimEffect):
         arm = b - foot
         return arm[:, 0] * f[:, 1] - arm[:, 1] * f[:, 0]
 
+    def drop_deg_at(self, pull_n: float) -> float:
+        """The boom's drop (deg) at a rope pull of ``pull_n`` with the dipper where the
+        magnitude is stated (th = 0, d = 8.5 m): the truth a model's drop at that pose is
+        held against (the bench's coverage, the tests)."""
+        return self.magnitude * pull_n / 1e6
+
     def before_dynamics(self, ctx: dict[str, Any]) -> None:
         from shoveld.sim.plant import Plant
 

@@ -29,7 +29,7 @@ from shoveld.model.effects import (
 from shoveld.model.params import ModelParams, load_params, save_params
 from shoveld.model.terms import TERMS
 from shoveld.sample import samples_from_table
-from shoveld.sim.effects import DRUM_XY, SIM_EFFECTS, make_effects
+from shoveld.sim.effects import DRUM_XY, SIM_EFFECTS, BoomSuspensionSpringEffect, make_effects
 from shoveld.sim.plant import PlantParams
 from shoveld.sim.scenario import SensorNoise, simulate_cycles
 from tests.diagnose.conftest import session
@@ -292,7 +292,7 @@ def _boom_drop_on_trials(machine: Any, degrees: float, seed: int
     fit's nominal field."""
     p, sag, sag_se = _on_trials(machine, "boom_suspension_spring", degrees, seed, "K_H_sag")
     ref_a = TERMS["boom_suspension_spring"].defaults["ref_a"]
-    truth = degrees * machine.k_h_nominal(p) * ref_a / 1e6
+    truth = BoomSuspensionSpringEffect(degrees).drop_deg_at(machine.k_h_nominal(p) * ref_a)
     return math.degrees(sag), math.degrees(sag_se), truth
 
 
