@@ -33,7 +33,9 @@ A candidate identified with the verified passes is judged against the current mo
 identified on the same folds (``same_data``). The significant candidate with the largest
 share of the residual is added (one its physics confirms first; beside a term named on
 another witness, the lower payload RMS: ``_first``) and the search repeats; it stops
-when none is significant ("nothing significant" is an answer).
+when none is significant ("nothing significant" is an answer). Then each term found is
+judged again beside all the others, and one that no longer qualifies is removed
+(``_backward``).
 """
 
 from __future__ import annotations

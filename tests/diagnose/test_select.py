@@ -7,8 +7,9 @@ when the pair pays, a decisive one that fails the payload test is tried beside e
 other, a candidate that adds nothing beside the other is not brought in as a passenger,
 a term the trials cannot identify is identified with the passes, a term the residual
 cannot see is named on the payload or on a value that holds beside the earlier models
-and is ranked against a share of the residual on the payload, and one whose physics
-comes out impossible is neither named nor paired.
+and is ranked against a share of the residual on the payload, one whose physics comes
+out impossible is neither named nor paired, and a term the later ones explain is
+removed at the end.
 """
 
 from __future__ import annotations
@@ -589,12 +590,17 @@ def test_a_term_the_later_ones_explain_is_removed_at_the_end(monkeypatch: Any) -
         return made[tuple(sorted(effects))]
 
     monkeypatch.setattr(select, "evaluate", evaluate)
-    for backward, found in ((True, ["b", "c"]), (False, ["a", "b", "c"])):
+    for backward, found in ((False, ["a", "b", "c"]), (True, ["b", "c"])):
         sel = select.forward_select(DATA, ["a", "b", "c"], np.ones(2), [],
                                     SelectionConfig(backward=backward))
         assert sel.found == found, [(s.model, s.chosen, s.removed) for s in sel.steps]
         assert [s.chosen for s in sel.steps[:3]] == ["a", "b", "c"]
         assert sel.extended is made[tuple(found)]
+    # the last term added keeps the verdict of the step that added it beside a and b
+    back, added_c = sel.steps[3], sel.steps[2]
+    assert back.removed == "a" and back.model == ["a", "b", "c"]
+    assert next(v for v in back.candidates if v.name == "c") is next(
+        v for v in added_c.candidates if v.name == "c")
     gone = removals([{"model": s.model, "removed": s.removed,
                       "candidates": [c.as_dict() for c in s.candidates]}
                      for s in select.forward_select(DATA, ["a", "b", "c"], np.ones(2), [],
