@@ -56,13 +56,14 @@ def _summary(js: dict) -> str:
         lines.append("found: nothing significant")
     lines.append("")
     lines.append(f"{'candidate':26s} {'score':>8s} {'t':>7s} {'crit':>6s}  verdict")
+    gone = removals(js["steps"])
     for c in js["ranked"]:
         # an infinite t is a candidate with nothing to fit here (a delay of zero)
         t = "n/a" if c["t"] is None or not math.isfinite(c["t"]) else f"{c['t']:.2f}"
         score = 100 * (c["score"] or 0.0)
         sc = f"{score:+7.1f}%" if abs(score) < 1000 else f"{'unstable':>8s}"
         lines.append(f"{c['name']:26s} {sc} {t:>7s} {c['t_crit']:6.2f}  "
-                     f"{candidate_verdict(c, js['found'], removals(js['steps']))}")
+                     f"{candidate_verdict(c, js['found'], gone)}")
     for st in js["steps"]:
         for c in st.get("pairs", []):
             after = f" after {', '.join(st['model'])}" if st["model"] else ""

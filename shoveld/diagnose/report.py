@@ -335,8 +335,9 @@ def write_report(d: Diagnosis, out_dir: str | Path) -> Path:
               "| candidate | residual removed | t (critical) | held-out payload RMS | verdict |",
               "|---|---|---|---|---|"]
     pairs = js["steps"][0]["pairs"] if js["steps"] else []
+    gone = removals(js["steps"])
     for c in js["ranked"] + pairs:
-        verdict = candidate_verdict(c, d.found, removals(js["steps"]))
+        verdict = candidate_verdict(c, d.found, gone)
         if added(c["name"], d.found):
             verdict = f"**{verdict}**"
         score = 100 * (c["score"] or 0)
