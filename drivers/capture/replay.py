@@ -47,6 +47,7 @@ from drivers.capture.format import (
     SERIAL_KINDS,
     Capture,
     DeviceEntry,
+    RegisterColumns,
     RegisterRead,
     SerialChunk,
     read_capture,
@@ -358,12 +359,40 @@ _BLOCK = operator.attrgetter("function", "address", "count")
 _TIME = operator.attrgetter("t")
 
 
-class RecordedRegisters:
-    """Answers register reads from a recording: latest recorded outcome at capture time."""
+class _ColumnReads:
+    """The records of :class:`RegisterColumns` as a sequence of :class:`RegisterRead`,
+    each built when asked for (a replay asks for few: the span reader reads the words)."""
 
-    def __init__(self, reads: list[RegisterRead], clock: Callable[[], float]) -> None:
+    def __init__(self, cols: RegisterColumns) -> None:
+        self.cols = cols
+
+    def __len__(self) -> int:
+        return len(self.cols.times)
+
+    def __getitem__(self, i: int) -> RegisterRead:
+        if not -len(self) <= i < len(self):
+            raise IndexError(i)
+        return self.cols.read(i % len(self))
+
+
+class RecordedRegisters:
+    """Answers register reads from a recording: latest recorded outcome at capture time.
+
+    ``reads`` is the recording as :func:`read_modbus_reads` gives it, or as
+    :class:`RegisterColumns` where the file is one block always answered (the same
+    answers, and :meth:`columns` for readers that take the words as an array)."""
+
+    def __init__(self, reads: list[RegisterRead] | RegisterColumns,
+                 clock: Callable[[], float]) -> None:
         self.clock = clock
-        self._by_block: dict[tuple[int, int, int], tuple[list[float], list[RegisterRead]]] = {}
+        self._by_block: dict[tuple[int, int, int], tuple[list[float], Any]] = {}
+        self._columns: RegisterColumns | None = None
+        if isinstance(reads, RegisterColumns):
+            self._columns = reads
+            key = (reads.function, reads.address, reads.count)
+            self._by_block[key] = (reads.times, _ColumnReads(reads))
+            self.end_t = max(reads.times, default=0.0)
+            return
         keys = list(map(_BLOCK, reads))
         times = list(map(_TIME, reads))
         if len(set(keys)) == 1:  # the usual recording: one block, polled over and over
@@ -390,6 +419,11 @@ class RecordedRegisters:
         that block was never read as such), for readers that answer many polls at once."""
         entry = self._by_block.get(key)
         return None if entry is None else list(entry[1])
+
+    def columns(self, key: tuple[int, int, int]) -> RegisterColumns | None:
+        """Block ``key``'s recording as columns, where it was read so (else None)."""
+        c = self._columns
+        return c if c is not None and key == (c.function, c.address, c.count) else None
 
     NOT_YET = 6
     """Answer before the first recorded read: DEVICE_BUSY, an honest "no value yet"

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import operator
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -24,6 +24,9 @@ from drivers.base import DriverHealth
 from drivers.capture.format import RegisterRead
 from drivers.modbus_adc.driver import ModbusAdcDriver
 from drivers.spanio import SpanResult
+
+if TYPE_CHECKING:
+    from drivers.capture.replay import RecordedRegisters
 
 
 @dataclass
@@ -89,12 +92,12 @@ def _polled(h: DriverHealth, n: int, t: float) -> None:
 class ModbusSpanReader:
     """A :class:`ModbusAdcDriver` polling on its own schedule, read from recorded registers.
 
-    ``client`` is the driver's client; ``recording`` maps a block ``(function, address,
-    count)`` to its recorded reads (``RecordedRegisters.recorded``) and answers at the
-    time of the clock that stamps the driver's readings.
+    ``client`` is the driver's client; ``recording`` gives a block ``(function, address,
+    count)``'s recorded reads (``RecordedRegisters.columns`` or ``.recorded``) and
+    answers at the time of the clock that stamps the driver's readings.
     """
 
-    def __init__(self, driver: ModbusAdcDriver, client: Any, recording: Any,
+    def __init__(self, driver: ModbusAdcDriver, client: Any, recording: RecordedRegisters,
                  period: float) -> None:
         self.driver = driver
         self.client = client
@@ -102,6 +105,11 @@ class ModbusSpanReader:
         fc = driver.config.function_code
         self._blocks: list[_Block] | None = []
         for address, count, _chans, _dec in driver._plan:
+            cols = recording.columns((fc, address, count))
+            if cols is not None:  # every record an answer: the words as they are
+                self._blocks.append(_Block(np.array(cols.times, dtype=float),
+                                           np.ones(len(cols.times), dtype=bool), cols.words))
+                continue
             reads = recording.recorded((fc, address, count))
             if reads is None:  # answered from another block's recording: per tick only
                 self._blocks = None

@@ -11,7 +11,13 @@ import can
 import pytest
 
 from drivers.capture import CaptureFormatError, CaptureWriter, ReplayClock, read_capture
-from drivers.capture.format import RegisterRead, SerialChunk, read_serial_chunks
+from drivers.capture.format import (
+    RegisterRead,
+    SerialChunk,
+    read_modbus_columns,
+    read_modbus_reads,
+    read_serial_chunks,
+)
 from drivers.capture.replay import RecordedAnswers, RecordedRegisters, split_answers
 from shoveld.installation import Installation
 
@@ -344,3 +350,29 @@ def test_split_answer_columns_agree_with_a_bisect_per_chunk(seed: int) -> None:
     stream, ref_pairs = _split_reference(chunks, 0.05)
     assert list(zip(st, sd, strict=True)) == stream and pairs == ref_pairs
     assert split_answers(chunks, 0.05) == (stream, ref_pairs)
+
+
+def test_recorded_registers_answer_alike_from_columns(tmp_path: Path) -> None:
+    """The replay's register answers are the same whether the recording was read as
+    records or as columns: latest answer, a block inside the recorded one, before the
+    first read, and an address never recorded."""
+    body = "".join(
+        f'{{"t":{t},"unit":1,"fc":4,"addr":10,"count":3,"regs":[{t * 10:.0f},7,{65535 - i}]}}\n'
+        for i, t in enumerate((0.1, 0.2, 0.2, 0.5)))
+    p = tmp_path / "m.modbus.jsonl"
+    p.write_text('{"format":"shoveld-modbus-reads","version":1,"device":"m"}\n' + body)
+    cols = read_modbus_columns(p)
+    assert cols is not None
+    now = {"t": 0.0}
+    a = RecordedRegisters(cols, lambda: now["t"])
+    b = RecordedRegisters(list(read_modbus_reads(p)), lambda: now["t"])
+    assert a.end_t == b.end_t == 0.5
+    assert a.columns((4, 10, 3)) is cols and b.columns((4, 10, 3)) is None
+    assert a.columns((4, 10, 2)) is None
+    assert a.recorded((4, 10, 3)) == b.recorded((4, 10, 3))
+    for t in (0.0, 0.1, 0.15, 0.2, 0.49, 0.5, 9.0):
+        now["t"] = t
+        for block in ((4, 10, 3), (4, 11, 2), (4, 10, 1), (4, 0, 1), (3, 10, 3)):
+            assert a(*block) == b(*block), (t, block)
+    now["t"] = 0.2
+    assert a(4, 10, 3) == [2, 7, 65533]  # the later of the two reads at 0.2

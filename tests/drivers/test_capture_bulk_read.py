@@ -158,3 +158,42 @@ def test_modbus_files_of_answers_only_read_alike(name: str, tmp_path: Path) -> N
     p = _modbus_file(tmp_path, ANSWERED_CASES[name])
     whole, by_line = _both_ways(fmt.read_modbus_reads, p)
     assert whole == by_line
+
+
+def _as_columns(path: Path) -> list[fmt.RegisterRead] | None:
+    """The records of :func:`fmt.read_modbus_columns`, or None where it declines."""
+    cols = fmt.read_modbus_columns(path)
+    return None if cols is None else [cols.read(i) for i in range(len(cols.times))]
+
+
+@pytest.mark.parametrize("path", sorted(CAPTURES.glob("*/*.modbus.jsonl")),
+                         ids=lambda p: f"{p.parent.name}/{p.name}")
+def test_committed_modbus_recordings_read_alike_as_columns(path: Path) -> None:
+    """A healthy module's recording (one block, every poll answered) is read as columns,
+    record for record what the line-by-line reader gives."""
+    got = _as_columns(path)
+    assert got is not None and got == _outcome(fmt.read_modbus_reads, path, False)[0]
+
+
+COLUMN_CASES = {**{f"mixed {k}": v for k, v in MODBUS_CASES.items()}, **ANSWERED_CASES,
+                "one block": '{"t":0.1,"unit":2,"fc":3,"addr":7,"count":2,"regs":[0,65535]}\n'
+                             '{"t":0.1,"unit":2,"fc":3,"addr":7,"count":2,"regs":[5,6]}\n'
+                             '{"t":0.3,"unit":2,"fc":3,"addr":7,"count":2,"regs":[12,0]}\n'}
+
+
+@pytest.mark.parametrize("name", sorted(COLUMN_CASES))
+def test_modbus_columns_are_the_records_or_declined(name: str, tmp_path: Path) -> None:
+    """Columns are given only for a file of one block whose every record is a valid
+    answer, and then hold exactly its records; anything else (a timeout, an exception,
+    another block, a bad value, a torn line) is left to the reads, which name it."""
+    p = _modbus_file(tmp_path, COLUMN_CASES[name])
+    got = _as_columns(p)
+    records, err = _outcome(fmt.read_modbus_reads, p, False)
+    one_block = len({(r.unit, r.function, r.address, r.count) for r in records}) == 1
+    answered = all(r.registers is not None for r in records)
+    if err or not records or not one_block or not answered:
+        assert got is None
+    else:
+        assert got == records
+    if name == "one block":
+        assert got is not None and len(got) == 3
