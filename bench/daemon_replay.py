@@ -65,8 +65,8 @@ def free_port() -> int:
 def run_once(stepped: bool, breakdown: bool, subscriber: bool = False, bulk: bool = True
              ) -> dict[str, Any]:
     from shoveld.daemon.config import parse_config
-    from shoveld.daemon.replay import fast_replay_service, replay_service
     from shoveld.model.params import load_params
+    from shoveld.replay.service import fast_replay_service, replay_service
 
     port = free_port()
     listen = [f"tcp/127.0.0.1:{port}"] if subscriber else []

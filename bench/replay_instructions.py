@@ -47,8 +47,12 @@ def child(tree: Path, mode: str) -> None:
     import threading
 
     from shoveld.daemon.config import parse_config
-    from shoveld.daemon.replay import fast_replay_service
     from shoveld.model.params import load_params
+
+    try:
+        from shoveld.replay.service import fast_replay_service
+    except ImportError:  # a tree from before 2026-11-29, when replay lived in the daemon
+        from shoveld.daemon.replay import fast_replay_service  # type: ignore[no-redef]
 
     logging.disable(logging.WARNING)
     cap = tree / "hil_fixtures" / "captures" / "daemon-e2e"

@@ -40,8 +40,8 @@ def _free_port() -> int:
 def replay(capture: Path, truck_target_kg: float) -> dict[str, list[dict[str, Any]]]:
     """Passes and closed trucks of a fast replay of ``capture``."""
     from shoveld.daemon.config import parse_config
-    from shoveld.daemon.replay import fast_replay_service
     from shoveld.model.params import load_params
+    from shoveld.replay.service import fast_replay_service
 
     params_path = capture / "params.toml"
     with tempfile.TemporaryDirectory() as state:

@@ -132,7 +132,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         from drivers.capture.format import CaptureFormatError
         from shoveld.daemon.logs import setup_logging
-        from shoveld.daemon.replay import fast_replay_service, replay_service
+        from shoveld.replay.service import fast_replay_service, replay_service
     finally:
         if collecting:
             gc.enable()

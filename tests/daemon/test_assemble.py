@@ -9,8 +9,8 @@ import pytest
 from drivers.base import DriverHealth, Reading
 from shoveld.daemon.assemble import Assembler
 from shoveld.daemon.store import ReadingStore
-from shoveld.daemon.tablefeed import table_devices
 from shoveld.installation import Installation
+from shoveld.replay.table import table_devices
 
 INST = Installation(handle_pitch_offset_deg=2.0, handle_pitch_sign=-1.0,
                     swing_yaw_zero_deg=170.0, crowd_offset_m=6.0, crowd_gain=1.1)

@@ -9,8 +9,8 @@ import threading
 from pathlib import Path
 
 from shoveld.cli.cab import CabState, show
-from shoveld.daemon.tablefeed import table_service
 from shoveld.model.params import ModelParams
+from shoveld.replay.table import table_service
 from shoveld.signals.table import SignalsTable
 
 from .conftest import free_port, make_cfg

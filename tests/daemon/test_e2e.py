@@ -12,8 +12,8 @@ from typing import Any
 
 import pytest
 
-from shoveld.daemon.replay import replay_service
 from shoveld.model.params import ModelParams
+from shoveld.replay.service import replay_service
 
 from .conftest import CAPTURE, PARAMS, Collector, free_port, make_cfg
 

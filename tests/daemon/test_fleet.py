@@ -15,8 +15,8 @@ from pathlib import Path
 from typing import Any
 
 from shoveld.cli.cab import CabClient, CabState
-from shoveld.daemon.tablefeed import table_service
 from shoveld.model.params import ModelParams
+from shoveld.replay.table import table_service
 from shoveld.signals.table import SignalsTable
 
 from .conftest import Collector, Site, free_port, make_cfg, start_router, wait_for

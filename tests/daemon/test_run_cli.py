@@ -18,8 +18,8 @@ from hil_fixtures.virtual_shovel import VirtualShovel
 from shoveld.cli.demo import write_demo_config
 from shoveld.daemon.notify import Notifier
 from shoveld.daemon.service import Service
-from shoveld.daemon.tablefeed import table_service
 from shoveld.model.params import ModelParams
+from shoveld.replay.table import table_service
 from shoveld.signals.table import SignalsTable
 
 from .conftest import PARAMS, free_port, make_cfg

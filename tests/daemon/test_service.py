@@ -10,10 +10,10 @@ from typing import Any
 
 import pytest
 
-from shoveld.daemon.tablefeed import Fault, table_service
 from shoveld.engine.loop import EngineConfig
 from shoveld.engine.offline import estimate_table
 from shoveld.model.params import ModelParams
+from shoveld.replay.table import Fault, table_service
 from shoveld.signals.table import SignalsTable
 
 from .conftest import Collector, free_port, make_cfg

@@ -14,8 +14,8 @@ import pytest
 from shoveld.daemon.clock import SimClock
 from shoveld.daemon.config import ConfigError, DaemonConfig, parse_config
 from shoveld.daemon.loop import FixedRateLoop, PhaseLock
-from shoveld.daemon.tablefeed import table_service
 from shoveld.model.params import ModelParams
+from shoveld.replay.table import table_service
 from shoveld.signals.table import SignalsTable
 
 from .conftest import ROOT, make_cfg

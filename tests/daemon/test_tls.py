@@ -21,8 +21,8 @@ import pytest
 from shoveld.cli.cab import CabClient, CabState
 from shoveld.daemon.config import TlsConfig
 from shoveld.daemon.publisher import zenoh_config
-from shoveld.daemon.tablefeed import table_service
 from shoveld.model.params import ModelParams
+from shoveld.replay.table import table_service
 from shoveld.security import pki
 from shoveld.signals.table import SignalsTable
 

@@ -8,7 +8,7 @@ import copy
 from collections.abc import Callable
 from typing import Any, Protocol
 
-from shoveld.daemon.syncreplay import StepClock, SyncDevice
+from shoveld.replay.sync import StepClock, SyncDevice
 
 
 class SpanReader(Protocol):

@@ -17,7 +17,7 @@ from drivers.acuity.span import Ar4000SpanReader, digit_lines
 from drivers.base import Reading
 from drivers.capture.format import read_capture
 from shoveld.daemon.config import DeviceConfig, device_signals
-from shoveld.daemon.syncreplay import MemorySerial, StepClock, SyncDevice, SyncReplay
+from shoveld.replay.sync import MemorySerial, StepClock, SyncDevice, SyncReplay
 
 from .span_play import play
 

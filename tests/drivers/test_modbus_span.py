@@ -20,7 +20,7 @@ from drivers.modbus_adc.channels import Channel
 from drivers.modbus_adc.driver import ModbusAdcDriver
 from drivers.modbus_adc.span import ModbusSpanReader
 from shoveld.daemon.config import DeviceConfig, device_signals
-from shoveld.daemon.syncreplay import MemoryModbus, StepClock, SyncDevice, SyncReplay
+from shoveld.replay.sync import MemoryModbus, StepClock, SyncDevice, SyncReplay
 
 from .span_play import play
 

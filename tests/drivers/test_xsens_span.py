@@ -25,7 +25,7 @@ from drivers.xsens.serial_span import MtiSpanReader, consistent
 from drivers.xsens.xbus import MID, encode_frame
 from hil_fixtures.mti import MtiEmulator
 from shoveld.daemon.config import DeviceConfig, device_signals
-from shoveld.daemon.syncreplay import MemorySerial, StepClock, SyncDevice, SyncReplay
+from shoveld.replay.sync import MemorySerial, StepClock, SyncDevice, SyncReplay
 
 from .span_play import play
 

@@ -1,9 +1,9 @@
 """Fast replay's bulk front end: each device decoded on its own, samples built with numpy.
 
-The stepped fast replay (:mod:`shoveld.daemon.syncreplay`) runs the four drivers, the
+The stepped fast replay (:mod:`shoveld.replay.sync`) runs the four drivers, the
 store and the assembler inside every 10 ms tick. Nothing a driver does there depends
 on another device or on the engine, so here each device's driver runs alone over a
-span of ticks (:class:`~shoveld.daemon.syncreplay.SyncDevice`, the same stepping,
+span of ticks (:class:`~shoveld.replay.sync.SyncDevice`, the same stepping,
 handshakes, parsers and health rules), and its readings are kept with their ticks.
 Where nothing but the usual can happen, a driver's span reader does the work of many
 of its per-tick reads at once on the recording as numpy arrays (the MTi's frames, the
@@ -13,7 +13,7 @@ rules (:meth:`BulkFeed._assemble`), and the loop only hands each one to the engi
 (:class:`BulkAssembler` stands in for the service's assembler).
 
 Work goes in spans of ``span_ticks`` so that memory does not grow with the capture.
-``tests/daemon/test_bulkfeed.py`` checks sample for sample and pass for pass that this
+``tests/replay/test_bulk.py`` checks sample for sample and pass for pass that this
 gives what the stepped path gives on every committed capture.
 """
 
@@ -38,8 +38,8 @@ from drivers.xsens.serial_span import MtiSpanReader
 from shoveld.daemon.assemble import DeviceState
 from shoveld.daemon.config import LASER_KINDS, MTI_KINDS, DeviceConfig
 from shoveld.daemon.store import ReadingStore
-from shoveld.daemon.syncreplay import MemoryModbus, MemorySerial, SyncDevice, SyncReplay
 from shoveld.installation import Installation
+from shoveld.replay.sync import MemoryModbus, MemorySerial, SyncDevice, SyncReplay
 from shoveld.sample import SIGNAL_FIELDS, Sample
 from shoveld.signals.columns import BY_NAME
 

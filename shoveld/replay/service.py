@@ -28,9 +28,9 @@ from shoveld.daemon.clock import ReplayPacedClock, ReplayStepClock, SimClock
 from shoveld.daemon.config import DaemonConfig, DeviceConfig, device_signals
 from shoveld.daemon.publisher import Publisher
 from shoveld.daemon.service import Service
-from shoveld.daemon.syncreplay import SyncReplay
 from shoveld.installation import Installation
 from shoveld.model.params import ModelParams
+from shoveld.replay.sync import SyncReplay
 
 log = logging.getLogger(__name__)
 
@@ -141,9 +141,9 @@ def fast_replay_service(capture_dir: str | Path, cfg: DaemonConfig, params: Mode
                         bulk: bool = True) -> ReplayRun:
     """The service on the drivers' in-memory transports: deterministic, as fast as the
     engine allows. ``bulk``: each device decoded alone and the samples built with numpy
-    ahead of the ticks (:mod:`shoveld.daemon.bulkfeed`); else the drivers, the store
+    ahead of the ticks (:mod:`shoveld.replay.bulk`); else the drivers, the store
     and the assembler run inside each tick (:class:`SyncReplay`), as live. Both give the
-    same samples and passes (tests/daemon/test_bulkfeed.py).
+    same samples and passes (tests/replay/test_bulk.py).
 
     The Zenoh session starts opening first, in its thread, while the capture is read
     (``Service.start`` then waits for it as usual): opening it is 5 ms that release the
@@ -181,7 +181,7 @@ def _fast_replay_service(capture_dir: str | Path, cfg: DaemonConfig, params: Mod
         sync.attach({n: svc.store.sink(n, threaded=False) for n in devices})  # one thread
         return ReplayRun(svc, sync, None)
     from drivers.base import DriverHealth
-    from shoveld.daemon.bulkfeed import BulkAssembler, BulkFeed, BulkSession, ReplayedDriver
+    from shoveld.replay.bulk import BulkAssembler, BulkFeed, BulkSession, ReplayedDriver
 
     drivers: dict[str, Any] = {n: ReplayedDriver(n, DriverHealth()) for n in devices}
     svc = Service(rcfg, params, clock=clock, driver_clock=sync.clock, drivers=drivers,

@@ -1,6 +1,6 @@
 """Fast replay: the drivers' own code on in-memory transports, stepped by the loop itself.
 
-The threaded replay (:mod:`shoveld.daemon.replay`) runs every driver in its thread
+The threaded replay (:mod:`shoveld.replay.service`) runs every driver in its thread
 against ptys, a virtual CAN bus and a Modbus server, exactly like live; but each
 10 ms tick then needs several thread and socket hand-offs, which limits it to a few
 times real time, and the order in which threads see data can vary between runs.
@@ -16,7 +16,7 @@ capture gives the same readings, samples and passes on every run.
 
 This is the per-tick feeder, in the live daemon's order of work. ``shoveld replay
 --fast`` steps the same :class:`SyncDevice` objects one device at a time ahead of the
-loop and builds the samples in bulk (:mod:`shoveld.daemon.bulkfeed`); both give the
+loop and builds the samples in bulk (:mod:`shoveld.replay.bulk`); both give the
 same samples.
 """
 

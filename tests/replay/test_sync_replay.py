@@ -8,7 +8,7 @@ from typing import Any
 from drivers.base import Reading
 from drivers.capture.format import read_capture
 from shoveld.daemon.config import DeviceConfig, device_signals
-from shoveld.daemon.syncreplay import SyncReplay
+from shoveld.replay.sync import SyncReplay
 
 CAPTURE = Path(__file__).resolve().parents[2] / "hil_fixtures" / "captures" / "daemon-e2e"
 

@@ -11,10 +11,9 @@ import pytest
 
 from drivers.capture.format import CaptureFormatError
 from shoveld.daemon.publisher import Publisher
-from shoveld.daemon.replay import fast_replay_service
 from shoveld.model.params import load_params
-
-from .conftest import CAPTURE, PARAMS, free_port, make_cfg, wait_for
+from shoveld.replay.service import fast_replay_service
+from tests.daemon.conftest import CAPTURE, PARAMS, free_port, make_cfg, wait_for
 
 
 def _port_free(port: int) -> bool:

@@ -19,11 +19,11 @@ import numpy as np
 import pytest
 
 from hil_fixtures.regress import captures
-from shoveld.daemon.bulkfeed import unwrapped_swing
 from shoveld.daemon.config import parse_config
-from shoveld.daemon.replay import fast_replay_service
 from shoveld.installation import Installation, unwrap_deg
 from shoveld.model.params import load_params
+from shoveld.replay.bulk import unwrapped_swing
+from shoveld.replay.service import fast_replay_service
 from shoveld.sample import Sample
 
 HOST_TIMED = ("zenoh", "pass_log", "ok")
