@@ -24,10 +24,10 @@ every ``joints`` message it receives. Figures:
   thread (``/proc/self/task/*/schedstat``: driver threads, the loop, Zenoh's threads);
 * ``--profile``: py-spy (``pip install py-spy``) samples the thread holding the GIL
   during the run and the top functions are printed (``--profile-out`` keeps the raw
-  samples for a flame graph).
+  samples; ``--flame SVG`` writes py-spy's flame graph of the same seconds).
 
 Usage: ``.venv/bin/python bench/daemon_live.py [--seconds 60] [--sync mti|none]
-[--publish-rate 10] [--no-align-polls] [--profile] [--json]``
+[--publish-rate 10] [--no-align-polls] [--profile [--flame SVG]] [--json]``
 """
 
 from __future__ import annotations
@@ -128,7 +128,8 @@ def cpu_by_thread(before: dict[int, float], after: dict[int, float], wall: float
             if v >= 0.005}
 
 
-def start_py_spy(seconds: float, out: str) -> subprocess.Popen[bytes] | None:
+def start_py_spy(seconds: float, out: str, fmt: str = "raw"
+                 ) -> subprocess.Popen[bytes] | None:
     # beside the interpreter (installed in its venv), else $PY_SPY or on the PATH
     exe = Path(sys.executable).with_name("py-spy")
     if not exe.exists():
@@ -140,7 +141,7 @@ def start_py_spy(seconds: float, out: str) -> subprocess.Popen[bytes] | None:
         return None
     return subprocess.Popen([str(exe), "record", "-p", str(os.getpid()), "-d",
                              str(max(1, int(seconds))), "-r", "250", "--gil", "--threads",
-                             "--nonblocking", "-f", "raw", "-o", out],
+                             "--nonblocking", "-f", fmt, "-o", out],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
 
@@ -184,6 +185,9 @@ def main() -> int:
                     help="[loop] align_polls = false: Modbus polls on their own schedule")
     ap.add_argument("--profile", action="store_true", help="py-spy the run (GIL holder)")
     ap.add_argument("--profile-out", default=None, help="keep py-spy's raw samples here")
+    ap.add_argument("--flame", default=None, metavar="SVG",
+                    help="with --profile: also a flame graph of the same seconds (py-spy's "
+                         "own SVG, a second sampler beside the first)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
 
@@ -225,6 +229,8 @@ def main() -> int:
             st_.all.clear()
         prof_out = args.profile_out or os.path.join(tmp, "py-spy.raw")
         spy = start_py_spy(args.seconds, prof_out) if args.profile else None
+        flame = (start_py_spy(args.seconds, args.flame, "flamegraph")
+                 if args.profile and args.flame else None)
         master = args.sync if args.sync in svc.latency_by_device else "mti"
         stored0 = svc.store.count(master)
         cpu0, t0, threads0 = time.process_time(), time.monotonic(), thread_cpu_s()
@@ -235,6 +241,8 @@ def main() -> int:
         stop.set()
         loop.join()
         profile = None
+        if flame is not None:
+            flame.wait(30)
         if spy is not None:
             spy.wait(30)
             profile = summarize_py_spy(prof_out) if os.path.exists(prof_out) else None
