@@ -148,6 +148,7 @@ def as_json(d: Diagnosis) -> dict[str, Any]:
                      "max_effects": cfg.max_effects, "payload_alpha": cfg.payload_alpha,
                      "decisive_gain": (cfg.decisive_gain if math.isfinite(cfg.decisive_gain)
                                        else None),
+                     "decisive_worse_alpha": cfg.decisive_worse_alpha,
                      "same_data": cfg.same_data,
                      "blind_z": cfg.blind_z if math.isfinite(cfg.blind_z) else None,
                      "agree_se": cfg.agree_se, "backward": cfg.backward,
@@ -371,7 +372,10 @@ def write_report(d: Diagnosis, out_dir: str | Path) -> Path:
               f"step), removes at least {100 * d.config.min_gain:.0f} % of the held-out residual, "
               "and cuts the verified passes' payload errors significantly"
               + (f" (or, where it removes at least {100 * d.config.decisive_gain:.0f} % of the "
-                 "residual, does not raise their payload RMS)"
+                 "residual, "
+                 + (f"does not make them significantly worse: one-sided, alpha "
+                    f"{d.config.decisive_worse_alpha})" if d.config.decisive_worse_alpha < 1.0
+                    else "does not raise their payload RMS)")
                  if math.isfinite(d.config.decisive_gain) else "")
               + ("; a candidate identified with the verified passes is judged against the "
                  "current model identified on the same passes" if d.config.same_data else "")
