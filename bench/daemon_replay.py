@@ -198,8 +198,10 @@ def main() -> int:
     args = ap.parse_args()
     logging.basicConfig(level=logging.ERROR)
     out: dict[str, Any] = {}
-    if args.command:  # first: after the in-process replays the same command read 10-30 ms
-        out["command"] = run_command(args.repeat)  # slower (2026-11-29), as no user runs it
+    # the whole command first: after the in-process replays below the same command read
+    # 10-30 ms slower (2026-11-29), a state of the machine no user starts it in
+    if args.command:
+        out["command"] = run_command(args.repeat)
     bulk, per_tick = [], []
     for _ in range(args.repeat):  # interleaved: a burst of load hits both alike
         bulk.append(run_once(False, False, args.subscriber))

@@ -140,8 +140,8 @@ class Capture:
     def modbus_reads(self, name: str) -> Iterator[RegisterRead]:
         return read_modbus_reads(self.file(name))
 
-    def modbus_columns(self, name: str) -> RegisterColumns | None:
-        return read_modbus_columns(self.file(name))
+    def modbus_recording(self, name: str) -> RegisterColumns | list[RegisterRead]:
+        return read_modbus_recording(self.file(name))
 
     def can_messages(self, name: str) -> Iterator[tuple[float, Any]]:
         return read_can_messages(self.file(name), self.start_unix)
@@ -325,8 +325,12 @@ def _head_ok(unit: int, fc: int, addr: int, count: int) -> bool:
     return unit <= 255 and 3 <= fc <= 4 and addr <= 65535 and 1 <= count <= 125
 
 
-def _fast_modbus_reads(path: Path) -> list[RegisterRead] | None:
-    recs = _bulk_records(path, MODBUS_FORMAT, _MODBUS_LINE)
+def _fast_modbus_reads(path: Path, recs: list[tuple[str, ...]] | None = None
+                       ) -> list[RegisterRead] | None:
+    """The whole-file path's records (``recs``: the file's line matches, if already
+    made), or None where the line-by-line reader must read it."""
+    if recs is None:
+        recs = _bulk_records(path, MODBUS_FORMAT, _MODBUS_LINE)
     if recs is None:
         return None
     if recs and all(r[5] for r in recs):
@@ -407,8 +411,25 @@ def read_modbus_columns(path: str | os.PathLike[str]) -> RegisterColumns | None:
     """The file's records as :class:`RegisterColumns`, or None when it holds anything
     else (a timeout, an exception, another block, a line of another shape, a bad value:
     :func:`read_modbus_reads` reads those, and names what is wrong)."""
+    return _columns(_bulk_records(Path(path), MODBUS_FORMAT, _MODBUS_LINE))
+
+
+def read_modbus_recording(path: str | os.PathLike[str]
+                          ) -> RegisterColumns | list[RegisterRead]:
+    """The file as :class:`RegisterColumns` where it is a healthy module's recording,
+    else as :func:`read_modbus_reads`' records (the same errors), the file read once
+    for the whole-file paths."""
     p = Path(path)
     recs = _bulk_records(p, MODBUS_FORMAT, _MODBUS_LINE)
+    cols = _columns(recs)
+    if cols is not None:
+        return cols
+    fast = _fast_modbus_reads(p, recs) if recs is not None else None
+    return fast if fast is not None else list(read_modbus_reads(p, whole_file=False))
+
+
+def _columns(recs: list[tuple[str, ...]] | None) -> RegisterColumns | None:
+    """:func:`read_modbus_columns` on the file's line matches."""
     if not recs or not all(r[5] for r in recs):
         return None
     ts, us, fs, As, cs, regs_s, _codes = zip(*recs, strict=True)

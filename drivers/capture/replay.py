@@ -386,9 +386,7 @@ class RecordedRegisters:
                  clock: Callable[[], float]) -> None:
         self.clock = clock
         self._by_block: dict[tuple[int, int, int], tuple[list[float], Any]] = {}
-        self._columns: RegisterColumns | None = None
         if isinstance(reads, RegisterColumns):
-            self._columns = reads
             key = (reads.function, reads.address, reads.count)
             self._by_block[key] = (reads.times, _ColumnReads(reads))
             self.end_t = max(reads.times, default=0.0)
@@ -422,8 +420,9 @@ class RecordedRegisters:
 
     def columns(self, key: tuple[int, int, int]) -> RegisterColumns | None:
         """Block ``key``'s recording as columns, where it was read so (else None)."""
-        c = self._columns
-        return c if c is not None and key == (c.function, c.address, c.count) else None
+        entry = self._by_block.get(key)
+        return entry[1].cols if entry is not None and isinstance(entry[1], _ColumnReads) \
+            else None
 
     NOT_YET = 6
     """Answer before the first recorded read: DEVICE_BUSY, an honest "no value yet"

@@ -356,10 +356,7 @@ class SyncReplay:
                 drv = build_driver(dev, self.clock, bus_factory=lambda _t=transport, **k: _t,
                                    **self._timeouts(entry.kind))
             elif entry.kind in MODBUS_KINDS:
-                cols = self.capture.modbus_columns(name)
-                regs = RecordedRegisters(
-                    cols if cols is not None else list(self.capture.modbus_reads(name)),
-                    self.clock)
+                regs = RecordedRegisters(self.capture.modbus_recording(name), self.clock)
                 tr = MemoryModbus(regs, regs.end_t)
                 drv = build_driver(dev, self.clock, client_factory=lambda cfg, _t=tr: _t)
             else:  # pragma: no cover - read_capture rejects unknown kinds

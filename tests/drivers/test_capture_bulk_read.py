@@ -197,3 +197,23 @@ def test_modbus_columns_are_the_records_or_declined(name: str, tmp_path: Path) -
         assert got == records
     if name == "one block":
         assert got is not None and len(got) == 3
+
+
+@pytest.mark.parametrize("name", sorted(COLUMN_CASES))
+def test_a_modbus_recording_is_its_records_in_either_form(name: str, tmp_path: Path) -> None:
+    """What the replay reads (``read_modbus_recording``: columns where they apply, else
+    the records, the file matched once) is what the line-by-line reader gives, or its
+    error."""
+    p = _modbus_file(tmp_path, COLUMN_CASES[name])
+    records, err = _outcome(fmt.read_modbus_reads, p, False)
+    try:
+        got = fmt.read_modbus_recording(p)
+    except fmt.CaptureFormatError as e:
+        assert err and str(e) == err
+        return
+    assert not err
+    if isinstance(got, fmt.RegisterColumns):
+        got = [got.read(i) for i in range(len(got.times))]
+        assert len({(r.unit, r.function, r.address, r.count) for r in records}) == 1
+        assert all(r.registers is not None for r in records)
+    assert got == records
