@@ -27,7 +27,8 @@ every ``joints`` message it receives. Figures:
   samples; ``--flame SVG`` writes py-spy's flame graph of the same seconds).
 
 Usage: ``.venv/bin/python bench/daemon_live.py [--seconds 60] [--sync mti|none]
-[--publish-rate 10] [--no-align-polls] [--profile [--flame SVG]] [--json]``
+[--publish-rate 10] [--no-align-polls] [--poll-hz adc_incl=20] [--profile [--flame SVG]]
+[--json]``
 """
 
 from __future__ import annotations
@@ -188,8 +189,20 @@ def main() -> int:
     ap.add_argument("--flame", default=None, metavar="SVG",
                     help="with --profile: also a flame graph of the same seconds (py-spy's "
                          "own SVG, a second sampler beside the first)")
+    ap.add_argument("--poll-hz", action="append", default=[], metavar="DEVICE=HZ",
+                    help="a Modbus module's poll rate (default: the virtual shovel's 50 Hz "
+                         "for both; examples/shoveld.toml polls adc_incl at 20)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
+    poll_hz: dict[str, float] = {}
+    for item in args.poll_hz:
+        name, sep, hz = item.partition("=")
+        try:
+            poll_hz[name] = float(hz)
+        except ValueError:
+            sep = ""
+        if not sep or not poll_hz[name] > 0:
+            ap.error(f"--poll-hz {item!r}: expected DEVICE=HZ with HZ > 0")
 
     from shoveld.daemon.config import parse_config
     from shoveld.daemon.service import Service
@@ -202,6 +215,12 @@ def main() -> int:
                              stdout=subprocess.PIPE, text=True, env=env)
     assert child.stdin is not None and child.stdout is not None
     vc = json.loads(child.stdout.readline())
+    for name, hz in poll_hz.items():
+        if name not in vc["devices"] or "poll_hz" not in vc["devices"][name]:
+            child.kill()
+            ap.error(f"--poll-hz: {name!r} is not a polled device of the virtual shovel "
+                     f"({', '.join(n for n, d in vc['devices'].items() if 'poll_hz' in d)})")
+        vc["devices"][name]["poll_hz"] = hz
     port = free_port()
     with tempfile.TemporaryDirectory() as tmp:
         cfg = parse_config({
@@ -257,6 +276,7 @@ def main() -> int:
     others = [x for n, ls in svc.latency_by_device.items() if n != master for x in ls.all]
     res: dict[str, Any] = {
         "rate_hz": args.rate, "publish_rate_hz": pub_rate, "seconds": round(wall, 1),
+        "poll_hz": {n: d["poll_hz"] for n, d in vc["devices"].items() if "poll_hz" in d},
         "ticks": st.ticks,
         "overruns": st.overruns, "skipped_ticks": st.skipped,
         "tick_jitter_ms": pct(late),
@@ -287,7 +307,8 @@ def main() -> int:
     else:
         j, a, s = res["tick_jitter_ms"], res["arrival_to_publish_ms"], res["tick_to_subscriber_ms"]
         print(f"{res['seconds']} s at {args.rate:g} Hz: {res['ticks']} ticks, "
-              f"{res['overruns']} overruns, {res['passes']} passes")
+              f"{res['overruns']} overruns, {res['passes']} passes; topics at {pub_rate:g} Hz, "
+              f"Modbus polls {res['poll_hz']}")
         print(f"tick jitter      p50 {j['p50']:.3f} ms  p99 {j['p99']:.3f} ms  max "
               f"{j['max']:.3f} ms")
         print(f"arrival->publish p50 {a['p50']:.3f} ms  p99 {a['p99']:.3f} ms  (n={a['n']}, "
