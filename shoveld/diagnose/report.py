@@ -149,6 +149,7 @@ def as_json(d: Diagnosis) -> dict[str, Any]:
                      "decisive_gain": (cfg.decisive_gain if math.isfinite(cfg.decisive_gain)
                                        else None),
                      "decisive_worse_alpha": cfg.decisive_worse_alpha,
+                     "align_first": cfg.align_first,
                      "same_data": cfg.same_data,
                      "blind_z": cfg.blind_z if math.isfinite(cfg.blind_z) else None,
                      "agree_se": cfg.agree_se, "backward": cfg.backward,
@@ -391,6 +392,12 @@ def write_report(d: Diagnosis, out_dir: str | Path) -> Path:
                     "look alike to the residual) is judged the same way, on the payload "
                     "whatever its share of the residual" if masked else "")
                  if math.isfinite(d.config.blind_z) else "")
+              + (". Of those that qualify at a step, a re-alignment of the sensor streams "
+                 "in time that removes a decisive share of the residual is added first (the "
+                 "other terms fitted on streams out of step take part of the lag into their "
+                 "own shape), then one whose value is the one its physics predicts, else the "
+                 "largest share" if d.config.align_first and math.isfinite(
+                     d.config.decisive_gain) else "")
               + ". The search repeats until none qualifies"
               + ("; then each term found is judged again beside all the others, as if it "
                  "came last, and one that no longer qualifies is removed" if d.config.backward

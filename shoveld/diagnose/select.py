@@ -32,8 +32,9 @@ fall significantly or its value holds beside the earlier steps' models.
 
 A candidate identified with the verified passes is judged against the current model
 identified on the same folds (``same_data``). The significant candidate with the largest
-share of the residual is added (one its physics confirms first; beside a term named on
-another witness, the lower payload RMS: ``_first``) and the search repeats; it stops
+share of the residual is added (a decisive re-alignment of the streams in time first,
+``align_first``; then one its physics confirms; beside a term named on another witness,
+the lower payload RMS: ``_first``) and the search repeats; it stops
 when none is significant ("nothing significant" is an answer). Then each term found is
 judged again beside all the others, and one that no longer qualifies is removed
 (``_backward``).
@@ -97,6 +98,15 @@ class SelectionConfig:
     was refused on 83 -> 98 kg over 14 passes. On the saved sets 13-19 and both draws of
     the singles it named three more pairs right and changed no other name
     (docs/diagnosis.md, twenty-second session). 1.0: any rise refuses it (before)."""
+    align_first: bool = True
+    """A significant term that re-aligns the sensor streams in time
+    (``ExtensionTerm.aligns_streams``: the time skew) and takes a decisive share of the
+    residual (``decisive_gain``) is added before any other that qualifies at the same
+    step, whatever their shares: a model term fitted on streams out of step takes part
+    of the lag into its own shape (the saturation's knee took a 155-159 ms skew on two
+    pairs of the twentieth set, and the skew then fell below significance beside it).
+    A smaller share is ranked as any other (a spurious 60 ms laser lag took 6 % on a
+    slope + saturation machine). False: ranked by share only (before)."""
     same_data: bool = True
     """Judge a candidate identified with the verified passes (it needs a full dipper or
     swinging, ``fit.needs_operation``) against the current model identified on the same
@@ -445,15 +455,21 @@ def _cache_key(effects: list[str], folds: bool) -> tuple[str, ...]:
     return (*effects, FOLDS) if folds else tuple(effects)
 
 
-def _first(scores: Sequence[CandidateScore]) -> CandidateScore | None:
+def _first(scores: Sequence[CandidateScore], cfg: SelectionConfig) -> CandidateScore | None:
     """The significant candidate a step adds (``scores`` sorted by their share of the
-    residual): one its physics confirms (``_confirmed``) first, else the largest share,
+    residual): a decisive re-alignment of the streams first (``cfg.align_first``), then
+    one its physics confirms (``_confirmed``), else the largest share,
     unless a term the residual cannot judge (named on another witness: the payload, its
     value's agreement) is significant beside it. A share cannot rank what the residual
     cannot see, so then the two are ranked on what both were judged on, the verified
     held-out passes' payload RMS: beside the saturation the boom's pose-shaped term took
     2.4 % of the residual (292 kg) where the friction it masks took none (232 kg), and
     named first the boom's term kept the friction out (docs/diagnosis.md)."""
+    if cfg.align_first:
+        for s in scores:
+            if s.significant and s.gain >= cfg.decisive_gain and getattr(
+                    TERMS.get(s.name), "aligns_streams", False):
+                return s
     sig = sorted((s for s in scores if s.significant), key=lambda s: not s.confirmed)
     if not sig or sig[0].confirmed or sig[0].witness != "residual":
         return sig[0] if sig else None
@@ -561,11 +577,15 @@ def forward_select(dataset: DataSet, library: list[str], sigma0: np.ndarray,
     # the passes): every model with one of them is identified with the verified passes.
     on_folds: set[str] = set()
     n_verified = sum(p.verified for p in dataset.passes)
+    # the evaluations this selection asked for: a cache filled by another rule's run holds
+    # others too, which the agreement witness must not see (``fitted_before``)
+    used: set[tuple[str, ...]] = set()
 
     def ev(effects: list[str], parent: Evaluation | None = None, folds: bool = False
            ) -> Evaluation:
         folds = folds or any(e in on_folds for e in effects)
         key = _cache_key(effects, folds)
+        used.add(key)
         if key not in cache:
             hyper = {e: dict(fixed_hyper[e]) for e in effects if e in fixed_hyper}
             fold_hyper = ([dict(f.hyper) for f in parent.folds]
@@ -585,11 +605,11 @@ def forward_select(dataset: DataSet, library: list[str], sigma0: np.ndarray,
 
     def fitted_before(c: str) -> list[Evaluation]:
         """``c``'s fits beside the models of the earlier steps, as judged there (on the
-        folds where it was refitted so): from the cache, no new fit."""
+        folds where it was refitted so): from this run's fits, no new one."""
         found = []
         for st in steps:
             for folds in (True, False):
-                if (key := _cache_key([*st.model, c], folds)) in cache:
+                if (key := _cache_key([*st.model, c], folds)) in used:
                     found.append(cache[key])
                     break
         return found
@@ -623,7 +643,7 @@ def forward_select(dataset: DataSet, library: list[str], sigma0: np.ndarray,
                 cand, score = judge(c)
             scores.append(score)
         scores.sort(key=lambda s: -s.gain if math.isfinite(s.gain) else math.inf)
-        chosen = first.name if (first := _first(scores)) else None
+        chosen = first.name if (first := _first(scores, cfg)) else None
         sig = [s for s in scores if s.significant]
         added = [chosen] if chosen else []
         tried_pairs: list[CandidateScore] = []

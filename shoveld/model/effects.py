@@ -71,6 +71,11 @@ class ExtensionTerm(Term):
     them is in the model the residual cannot judge this term, and the selection may name
     it on the payload as a ``residual_blind`` term, whatever share of the residual it
     takes (``SelectionConfig.blind_z``)."""
+    aligns_streams: ClassVar[bool] = False
+    """The term moves the data, not the model: it re-aligns sensor streams in time
+    (``transform``), so every other term fitted on the streams out of step is distorted
+    by them; the selection adds it first when it takes a decisive share
+    (``SelectionConfig.align_first``)."""
     per_load: ClassVar[bool] = False
     """The term acts per kilogram of load (payload columns only): its signal on a pass
     grows with the load, and the selection weights the passes so when it tests it
@@ -387,6 +392,7 @@ class SensorTimeSkew(ExtensionTerm):
     cause = ("the arm-position sensors and the current logger are out of step in time "
              "(one sensor stream is delayed)")
     signature = "time_shift"
+    aligns_streams = True
     defaults = {"delay_s": 0.0, "crowd_lag_s": 0.0}
     search = {"delay_s": (-0.3, 0.3), "crowd_lag_s": (-0.3, 0.3)}
     model_error_s: ClassVar[dict[str, float]] = {"mti": 0.0115, "laser": 0.0174}
