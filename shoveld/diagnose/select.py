@@ -104,9 +104,12 @@ class SelectionConfig:
     residual (``decisive_gain``) is added before any other that qualifies at the same
     step, whatever their shares: a model term fitted on streams out of step takes part
     of the lag into its own shape (the saturation's knee took a 155-159 ms skew on two
-    pairs of the twentieth set, and the skew then fell below significance beside it).
-    A smaller share is ranked as any other (a spurious 60 ms laser lag took 6 % on a
-    slope + saturation machine). False: ranked by share only (before)."""
+    pairs of the twentieth set, and beside it the skew then failed the tests). A
+    smaller share is ranked as any other (a spurious 60 ms laser lag took 6 % on a
+    slope + saturation machine). On every saved case (pair sets 13-20, both draws of
+    the singles) it changed one name, the friction + skew pair found; a set drawn after
+    it read 15/15, as with it off (docs/diagnosis.md, twenty-third session). False:
+    ranked by share only (before)."""
     same_data: bool = True
     """Judge a candidate identified with the verified passes (it needs a full dipper or
     swinging, ``fit.needs_operation``) against the current model identified on the same
