@@ -107,9 +107,10 @@ class SelectionConfig:
     pairs of the twentieth set, and beside it the skew then failed the tests). A
     smaller share is ranked as any other (a spurious 60 ms laser lag took 6 % on a
     slope + saturation machine). On every saved case (pair sets 13-20, both draws of
-    the singles) it changed one name, the friction + skew pair found; a set drawn after
-    it read 15/15, as with it off (docs/diagnosis.md, twenty-third session). False:
-    ranked by share only (before)."""
+    the singles) it changed one name, the friction + skew pair found; on two sets drawn
+    after it, 15/15 as with it off, and 14/15 against 13/15, another friction + skew pair
+    found (docs/diagnosis.md, twenty-third session). False: ranked by share only
+    (before)."""
     same_data: bool = True
     """Judge a candidate identified with the verified passes (it needs a full dipper or
     swinging, ``fit.needs_operation``) against the current model identified on the same
