@@ -196,13 +196,14 @@ def main() -> int:
     args = ap.parse_args()
     poll_hz: dict[str, float] = {}
     for item in args.poll_hz:
-        name, sep, hz = item.partition("=")
+        name, _, hz = item.partition("=")
         try:
-            poll_hz[name] = float(hz)
+            value = float(hz)
         except ValueError:
-            sep = ""
-        if not sep or not poll_hz[name] > 0:
+            value = float("nan")
+        if not value > 0:
             ap.error(f"--poll-hz {item!r}: expected DEVICE=HZ with HZ > 0")
+        poll_hz[name] = value
 
     from shoveld.daemon.config import parse_config
     from shoveld.daemon.service import Service
