@@ -14,6 +14,7 @@ import re
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 from shoveld.cli import CliError
 from shoveld.words import n_of
@@ -92,9 +93,12 @@ def _db(args: argparse.Namespace) -> Path:
     return db_path(cfg.state_dir)
 
 
-def run(args: argparse.Namespace) -> int:
+def read_window(args: argparse.Namespace
+                ) -> tuple[list[dict[str, Any]], Path, float | None, float | None]:
+    """The passes of ``--since``/``--until`` from the pass log the arguments name, the
+    log's path and the window read; one line naming the file where it is not a pass log
+    (``passes`` and ``report`` read alike)."""
     from shoveld.daemon.persist import read_passes
-    from shoveld.payload.trucks import Truck, rule_101020
 
     since = parse_when(args.since) if args.since else None
     until = parse_when(args.until) if args.until else None
@@ -105,6 +109,13 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(str(e)) from None
     except Exception as e:  # noqa: BLE001 - sqlite3.DatabaseError: not a pass log
         raise CliError(f"{path}: cannot read the pass log: {e}") from None
+    return rows, path, since, until
+
+
+def run(args: argparse.Namespace) -> int:
+    from shoveld.payload.trucks import Truck, rule_101020
+
+    rows, path, since, until = read_window(args)
     if args.csv:
         w = csv.writer(sys.stdout, lineterminator="\n")
         w.writerow(["pass", "truck", "shovel", "start", "end", "payload_kg", "std_kg",

@@ -34,20 +34,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from shoveld.cli.passes import _db, parse_when
-    from shoveld.daemon.persist import read_passes
+    from shoveld.cli.passes import read_window
     from shoveld.report.figures import shift_figures
     from shoveld.report.write import write_report
 
-    since = parse_when(args.since) if args.since else None
-    until = parse_when(args.until) if args.until else None
-    path = _db(args)
-    try:
-        rows = read_passes(path, since, until)
-    except FileNotFoundError as e:
-        raise CliError(str(e)) from None
-    except Exception as e:  # noqa: BLE001 - sqlite3.DatabaseError: not a pass log
-        raise CliError(f"{path}: cannot read the pass log: {e}") from None
+    rows, _, since, until = read_window(args)
     figures = shift_figures(rows, since, until)
     try:
         page = write_report(figures, Path(args.out), args.title)
