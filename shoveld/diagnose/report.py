@@ -82,7 +82,9 @@ def candidate_verdict(c: dict[str, Any], found: list[str],
                 "agreement": "added: the residual cannot see it, its value holds beside the "
                              "earlier models and the payload improves",
                 "prediction": "added: its value is the one its physics predicts, and the "
-                              "payload improves"
+                              "payload improves",
+                "delay": "added on its delay: a stream is late by more than five standard "
+                         "deviations, and the payload does not get worse"
                 }.get(c.get("witness", ""), "added")
     return str(c["why"] or "significant")
 
@@ -150,6 +152,7 @@ def as_json(d: Diagnosis) -> dict[str, Any]:
                                        else None),
                      "decisive_worse_alpha": cfg.decisive_worse_alpha,
                      "align_first": cfg.align_first,
+                     "delay_z": cfg.delay_z if math.isfinite(cfg.delay_z) else None,
                      "same_data": cfg.same_data,
                      "blind_z": cfg.blind_z if math.isfinite(cfg.blind_z) else None,
                      "agree_se": cfg.agree_se, "backward": cfg.backward,
@@ -398,6 +401,10 @@ def write_report(d: Diagnosis, out_dir: str | Path) -> Path:
                  "own shape), then one whose value is the one its physics predicts, else the "
                  "largest share" if d.config.align_first and math.isfinite(
                      d.config.decisive_gain) else "")
+              + (". A re-alignment significant on the residual that the payload tests cannot "
+                 "judge (a stream's lateness moves the payload little) is added when a "
+                 f"device is late by {d.config.delay_z:g} standard deviations or more and "
+                 "the payload does not get worse" if math.isfinite(d.config.delay_z) else "")
               + ". The search repeats until none qualifies"
               + ("; then each term found is judged again beside all the others, as if it "
                  "came last, and one that no longer qualifies is removed" if d.config.backward

@@ -689,3 +689,42 @@ def test_a_decisive_share_is_refused_only_where_the_payload_gets_worse_beyond_ch
     assert not refused.significant and "held-out RMS rises" in refused.why
     worse = compare(DATA, model(1.0, 400.0), model(0.7, 480.0), "b", 3, new)
     assert not worse.significant and "held-out RMS rises" in worse.why
+
+
+def test_a_time_skew_the_payload_cannot_judge_is_named_on_its_delay() -> None:
+    """Set 23's 1952 (saturation + a 168 ms skew): beside the saturation the skew took
+    7.5 % of the residual at t 3.09, short of the decisive share, and the dozen verified
+    passes could not show its payload gain (129 -> 119 kg, p 0.4), so the backward step
+    removed it, though the search found the MTi 0.14 +- 0.017 s late. A re-alignment
+    significant on the residual is named on its delay when a device is late by
+    ``delay_z`` standard deviations and the payload does not get worse; not with a
+    delay within them, nor where the payload gets worse, nor for a term that aligns no
+    streams, nor with ``delay_z`` infinite (the rule before)."""
+    from shoveld.model.terms import TERMS
+
+    def fitted(m: Any, name: str, **hyper: float) -> Any:
+        term = TERMS[name](**hyper)
+        m.final = SimpleNamespace(names=[], values=np.zeros(0), cov=np.zeros((0, 0)),
+                                  model=lambda: SimpleNamespace(terms=[term]))
+        return m
+
+    cur = model(1.0, 300.0)
+    late = dict(delay_s=0.14, crowd_lag_s=-0.12, mti_late_std_s=0.0128,
+                laser_late_std_s=0.029)
+    for name, hyper, err, cfg, named in (
+            ("sensor_time_skew", late, 295.0, SelectionConfig(), True),
+            ("sensor_time_skew", late, 295.0, SelectionConfig(delay_z=math.inf), False),
+            ("sensor_time_skew", {**late, "delay_s": 0.05, "crowd_lag_s": 0.0}, 295.0,
+             SelectionConfig(), False),  # 0.05 s +- 0.017: 2.9 standard deviations
+            ("sensor_time_skew", late, 320.0, SelectionConfig(), False),  # payload worse
+            ("hoist_rope_mass", {}, 295.0, SelectionConfig(), False)):
+        cand = fitted(model(0.925, err), name, **hyper)
+        s = compare(DATA, cur, cand, name, 3, cfg)
+        assert s.t > s.t_crit and s.gain < cfg.decisive_gain, s
+        assert s.significant is named, (name, hyper, err, s)
+        if named:
+            assert s.witness == "delay"
+            assert candidate_verdict({"name": name, "witness": s.witness}, [name]
+                                     ).startswith("added on its delay")
+        else:
+            assert s.why.startswith("does not pay on the payload"), s
