@@ -83,8 +83,8 @@ def candidate_verdict(c: dict[str, Any], found: list[str],
                              "earlier models and the payload improves",
                 "prediction": "added: its value is the one its physics predicts, and the "
                               "payload improves",
-                "delay": "added on its delay: a stream is late by more than five standard "
-                         "deviations, and the payload does not get worse"
+                "delay": "added on its delay: a stream is late well beyond its standard "
+                         "deviation, and the payload does not get worse"
                 }.get(c.get("witness", ""), "added")
     return str(c["why"] or "significant")
 
