@@ -27,6 +27,7 @@ import argparse
 import json
 import os
 import resource
+import select
 import selectors
 import socket
 import statistics
@@ -90,7 +91,7 @@ def run_threads(fds: tuple[int, int], socks: list[socket.socket], until: float) 
 
     def reader(fd: int) -> None:
         while time.monotonic() < until:
-            if select_read(fd, 0.1):
+            if select.select((fd,), (), (), 0.1)[0]:
                 os.read(fd, 4096)
 
     def poller(s: socket.socket, phase: float) -> None:
@@ -109,11 +110,6 @@ def run_threads(fds: tuple[int, int], socks: list[socket.socket], until: float) 
         th.start()
     for th in threads:
         th.join()
-
-
-def select_read(fd: int, timeout_s: float) -> bool:
-    import select
-    return bool(select.select((fd,), (), (), timeout_s)[0])
 
 
 def run_selector(fds: tuple[int, int], socks: list[socket.socket], until: float) -> None:
