@@ -95,25 +95,33 @@ ANGLES = ("roll_deg", "pitch_deg", "yaw_deg")
 
 
 def fuzz_xbus(n: int, rng: random.Random, t: Tally, orientation: str = "euler+quaternion",
-              breakdown: list[list[tuple[str, float, float]]] | None = None) -> None:
+              breakdown: list[list[tuple[str, float, float]]] | None = None,
+              extra_outputs: tuple[str, ...] = ()) -> None:
     """Corrupt one MTData2 frame between two clean ones; parse and decode as the driver
-    configured for ``orientation``. The committed capture's MTi sent Euler angles alone;
-    for the default (both) each of its packets gets the quaternion of its own Euler
-    angles, as the emulator and a real device send it. ``breakdown`` collects, per
-    accepted reading, (key, clean value, value read) of each value that differs."""
+    configured for ``orientation`` and ``extra_outputs``. The committed capture's MTi sent
+    Euler angles, rate of turn, acceleration and status word; each of its packets is
+    re-encoded with the configured items alone, in the configured order, and the
+    quaternion of its own Euler angles where both orientations are asked for, as the
+    emulator and a real device send them. ``breakdown`` collects, per accepted reading,
+    (key, clean value, value read) of each value that differs."""
     from drivers.base import Reading
-    from drivers.xsens.mtdata2 import XDI, encode_item, mtdata2_values
+    from drivers.xsens.mtdata2 import TYPE_MASK, XDI, encode_item, mtdata2_values
     from drivers.xsens.orientation import euler_deg_to_quat
     from drivers.xsens.serial_driver import MtiSerialDriver
     from drivers.xsens.xbus import XbusMessage, XbusParser, encode_frame
 
+    drv = MtiSerialDriver.from_config({"port": "/dev/null", "orientation": orientation,
+                                       "extra_outputs": list(extra_outputs)})
     p = XbusParser()
-    msgs = [m for m in p.feed(rx_bytes("mti.serial.jsonl")) if m.mid == 0x36]
-    if orientation == "euler+quaternion":
-        msgs = [XbusMessage(m.mid, m.data + encode_item(XDI.QUATERNION, euler_deg_to_quat(
-            *mtdata2_values(m.data)[XDI.EULER_ANGLES]))) for m in msgs]
+    msgs = []
+    for m in p.feed(rx_bytes("mti.serial.jsonl")):
+        if m.mid != 0x36:
+            continue
+        v = mtdata2_values(m.data)
+        v[XDI.QUATERNION] = euler_deg_to_quat(*v[XDI.EULER_ANGLES])
+        msgs.append(XbusMessage(m.mid, b"".join(
+            encode_item(xdi, v[xdi & TYPE_MASK]) for xdi, _ in drv.requested_outputs())))
     frames = [encode_frame(m.mid, m.data) for m in msgs]
-    drv = MtiSerialDriver.from_config({"port": "/dev/null", "orientation": orientation})
     clean: list[dict[str, float]] = []
     for m in msgs:
         r = drv.decode(m.data)
@@ -317,6 +325,9 @@ def main() -> None:
     ap.add_argument("--hang-s", type=float, default=1.0)
     ap.add_argument("--breakdown", action="store_true",
                     help="MTi: what each accepted reading differs in (field, bits, size)")
+    ap.add_argument("--extra-outputs", default="",
+                    help="MTi: what it also sends, comma-separated (rate_of_turn,"
+                         "acceleration,status_word); default none, as the driver's default")
     args = ap.parse_args()
     logging.disable(logging.WARNING)  # (a torn last line is warned about, by design)
     names = PARSERS if args.parser == "all" else (args.parser,)
@@ -328,12 +339,14 @@ def main() -> None:
         t0 = time.perf_counter()
         if name.startswith("xbus"):
             rows: list[list[tuple[str, float, float]]] | None = [] if args.breakdown else None
+            extras = tuple(x for x in args.extra_outputs.split(",") if x)
             fuzz_xbus(args.n, rng, t, "euler" if name == "xbus-euler" else "euler+quaternion",
-                      rows)
+                      rows, extras)
             note = ("readings from corrupted frames that reached the loop; 'of': corrupted "
                     "frames that passed the checksum; MTi sending "
                     + ("Euler angles alone" if name == "xbus-euler"
-                       else "Euler angles and quaternion (the default)"))
+                       else "Euler angles and quaternion (the default)")
+                    + (" and " + ", ".join(extras) if extras else ""))
         elif name == "ar4000":
             fuzz_ar4000(args.n, rng, t)
             note = "mutated lines read as a distance (the protocol has no checksum)"

@@ -610,7 +610,13 @@ def read_capture(path: str | os.PathLike[str]) -> Capture:
         if kind == "mti_serial" and isinstance(cfg, dict) and "orientation" not in cfg:
             # recorded before the MTi driver asked for Euler angles and quaternion both
             # (2026-11-26): the device was sent Euler angles alone
-            settings["config"] = {**cfg, "orientation": "euler"}
+            cfg = settings["config"] = {**cfg, "orientation": "euler"}
+        if kind == "mti_serial" and isinstance(cfg, dict) and "extra_outputs" not in cfg:
+            # recorded before the MTi was asked for the orientation alone (2026-11-29):
+            # it also sent its rate of turn, acceleration and status word
+            from drivers.xsens.serial_driver import RECORDED_BEFORE_EXTRAS
+
+            settings["config"] = {**cfg, "extra_outputs": list(RECORDED_BEFORE_EXTRAS)}
         out[name] = DeviceEntry(name, kind, fname, settings)
     start = m.get("start_unix", 0.0)
     if isinstance(start, bool) or not isinstance(start, int | float):

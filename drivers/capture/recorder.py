@@ -166,11 +166,13 @@ class Recorder:
                 from drivers.xsens.serial_driver import ORIENTATIONS, MtiSerialDriver
 
                 args = {k: v for k, v in d.items() if k != "kind"}
-                # the orientation is recorded even when it is the default: the default
-                # changed once, and a replay must configure what the device sent
+                # the orientation and the extra outputs are recorded even when they are
+                # the default: the defaults changed, and a replay must configure what the
+                # device sent
                 tap = self.writer.add_serial(
                     name, kind, port=d.get("port"), baudrate=d.get("baudrate", 115200),
-                    config={**d, "orientation": d.get("orientation", ORIENTATIONS[0])})
+                    config={**d, "orientation": d.get("orientation", ORIENTATIONS[0]),
+                            "extra_outputs": list(d.get("extra_outputs", ()))})
 
                 def factory(*a: Any, **kw: Any) -> Any:
                     return TappedSerial(serial.Serial(*a, **kw), tap)

@@ -180,5 +180,6 @@ def clean_run(buf: np.ndarray, max_payload: int,
 
 
 KEYS = (XDI.EULER_ANGLES, XDI.RATE_OF_TURN, XDI.ACCELERATION, XDI.PACKET_COUNTER,
-        XDI.SAMPLE_TIME_FINE, XDI.STATUS_WORD)
-"""The items of the packet :class:`MtiSerialDriver` configures (and the quaternion)."""
+        XDI.SAMPLE_TIME_FINE, XDI.STATUS_WORD, XDI.QUATERNION)
+"""Every item :class:`MtiSerialDriver` may configure; which of them it does, its
+``extra_outputs`` and ``orientation`` say."""

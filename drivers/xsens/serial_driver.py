@@ -72,6 +72,14 @@ _PACKET_COUNTER, _SAMPLE_TIME_FINE, _STATUS_WORD = (XDI.PACKET_COUNTER, XDI.SAMP
 _QUATERNION = XDI.QUATERNION
 ORIENTATIONS = ("euler+quaternion", "euler", "quaternion")
 """What the MTi is asked to send for its orientation; the first is the default."""
+EXTRA_OUTPUTS = ("rate_of_turn", "acceleration", "status_word")
+"""What the MTi may also be asked to send (``extra_outputs``). The loop uses only the
+orientation, so by default none is sent: every byte of a frame then either feeds the
+loop or checks what does (the 8-bit checksum lets 1 in 256 corrupted frames through,
+and a hit on an item nobody checks against anything reaches the loop unseen)."""
+RECORDED_BEFORE_EXTRAS = EXTRA_OUTPUTS
+"""What the driver asked for before ``extra_outputs`` existed (2026-11-29): captures
+whose manifest names no ``extra_outputs`` were recorded with all three."""
 AGREEMENT_DEG = 0.005
 """How far the Euler angles and the quaternion of one packet may disagree (as a rotation):
 both come from the device's one orientation, so only rounding separates them (about
@@ -121,14 +129,17 @@ def firmware_text(data: bytes) -> str:
 
 
 class MtiSerialDriver(Driver):
-    """One Xsens MTi on a serial port; emits roll/pitch/yaw, rates, accelerations."""
+    """One Xsens MTi on a serial port; emits roll/pitch/yaw (and rates, accelerations and
+    the status word where ``extra_outputs`` asks for them)."""
 
     CONFIG_KEYS: tuple[str, ...] = (
-        "name", "port", "baudrate", "rate_hz", "orientation", "precision", "coordinate_frame",
-        "stopbits", "command_timeout_s", "data_timeout_s", "read_timeout_s", "backoff_s")
+        "name", "port", "baudrate", "rate_hz", "orientation", "extra_outputs", "precision",
+        "coordinate_frame", "stopbits", "command_timeout_s", "data_timeout_s",
+        "read_timeout_s", "backoff_s")
 
     def __init__(self, name: str = "mti", port: str = "/dev/ttyUSB0", baudrate: int = 115200,
                  rate_hz: int = 100, orientation: str = ORIENTATIONS[0],
+                 extra_outputs: tuple[str, ...] | list[str] = (),
                  precision: str = "float32",
                  coordinate_frame: str = "ENU", stopbits: int = 1,
                  command_timeout_s: float = 1.0, data_timeout_s: float = 1.0,
@@ -147,6 +158,11 @@ class MtiSerialDriver(Driver):
                "an integer in 1..2000 Hz")
         _check("orientation", orientation, orientation in ORIENTATIONS,
                f"one of {ORIENTATIONS}")
+        _check("extra_outputs", extra_outputs,
+               isinstance(extra_outputs, (list, tuple))
+               and all(isinstance(x, str) and x in EXTRA_OUTPUTS for x in extra_outputs)
+               and len(set(extra_outputs)) == len(extra_outputs),
+               f"a list of distinct items of {list(EXTRA_OUTPUTS)}")
         _check("precision", precision, precision in PRECISION_BY_NAME,
                f"one of {sorted(PRECISION_BY_NAME)}")
         _check("coordinate_frame", coordinate_frame, coordinate_frame in FRAME_BY_NAME,
@@ -160,6 +176,14 @@ class MtiSerialDriver(Driver):
         self.rate_hz = rate_hz
         self.orientation = orientation
         self._redundant = orientation == "euler+quaternion"
+        self.extra_outputs = tuple(x for x in EXTRA_OUTPUTS if x in extra_outputs)
+        self._want_g, self._want_acc, self._want_sw = (x in self.extra_outputs
+                                                       for x in EXTRA_OUTPUTS)
+        self.value_keys = tuple(k for k in VALUE_KEYS if not (
+            (k.startswith("gyr") and not self._want_g)
+            or (k.startswith("acc") and not self._want_acc)
+            or (k == "status_word" and not self._want_sw)))
+        """The quantities of this configuration's readings, in :data:`VALUE_KEYS` order."""
         self.precision = precision
         self.coordinate_frame = coordinate_frame
         self.stopbits = stopbits
@@ -287,8 +311,13 @@ class MtiSerialDriver(Driver):
         frame = FRAME_BY_NAME[self.coordinate_frame]
         ori = XDI.QUATERNION if self.orientation == "quaternion" else XDI.EULER_ANGLES
         out = [(XDI.PACKET_COUNTER, MAX_FREQUENCY), (XDI.SAMPLE_TIME_FINE, MAX_FREQUENCY),
-               (ori | frame | prec, self.rate_hz), (XDI.ACCELERATION | prec, self.rate_hz),
-               (XDI.RATE_OF_TURN | prec, self.rate_hz), (XDI.STATUS_WORD, MAX_FREQUENCY)]
+               (ori | frame | prec, self.rate_hz)]  # the orientation third: its rate is read
+        if self._want_acc:
+            out.append((XDI.ACCELERATION | prec, self.rate_hz))
+        if self._want_g:
+            out.append((XDI.RATE_OF_TURN | prec, self.rate_hz))
+        if self._want_sw:
+            out.append((XDI.STATUS_WORD, MAX_FREQUENCY))
         if self._redundant:
             out.append((XDI.QUATERNION | frame | prec, self.rate_hz))
         return out
@@ -373,12 +402,16 @@ class MtiSerialDriver(Driver):
         t_host = self.clock()
         items, ids = mtdata2_values_ids(payload)
         get = items.get
-        e, g, acc = get(_EULER), get(_RATE_OF_TURN), get(_ACCELERATION)
-        pc, stf, sw = get(_PACKET_COUNTER), get(_SAMPLE_TIME_FINE), get(_STATUS_WORD)
+        e, pc, stf = get(_EULER), get(_PACKET_COUNTER), get(_SAMPLE_TIME_FINE)
+        g = get(_RATE_OF_TURN) if self._want_g else None
+        acc = get(_ACCELERATION) if self._want_acc else None
+        sw = get(_STATUS_WORD) if self._want_sw else None
         q = get(_QUATERNION) if self._redundant else None
-        if (e is not None and g is not None and acc is not None and pc is not None
-                and stf is not None and sw is not None  # the configured packet: all there
-                and (q is not None or not self._redundant)):
+        if (e is not None and pc is not None and stf is not None  # the configured packet
+                and (q is not None or not self._redundant)
+                and (g is not None or not self._want_g)
+                and (acc is not None or not self._want_acc)
+                and (sw is not None or not self._want_sw)):
             if ids is None or not ids <= self._ids:
                 # not the configured packet: an identifier byte was hit (a precision or
                 # frame bit decodes the same bytes another way, or in another frame)
@@ -387,12 +420,15 @@ class MtiSerialDriver(Driver):
             if not self._consistent(pc, stf, e, g, acc, q, sw):
                 return None
             self._count_gap(pc)
-            return Reading(self.name, t_host, {
-                "roll_deg": e[0], "pitch_deg": e[1], "yaw_deg": e[2],
-                "gyr_x": g[0], "gyr_y": g[1], "gyr_z": g[2],
-                "acc_x": acc[0], "acc_y": acc[1], "acc_z": acc[2],
-                "packet_counter": float(pc), "sample_time_fine": float(stf),
-                "status_word": float(sw)}, _NO_INVALID, stf * SAMPLE_TIME_FINE_S)
+            values = {"roll_deg": e[0], "pitch_deg": e[1], "yaw_deg": e[2],
+                      "packet_counter": float(pc), "sample_time_fine": float(stf)}
+            if g is not None:
+                values["gyr_x"], values["gyr_y"], values["gyr_z"] = g
+            if acc is not None:
+                values["acc_x"], values["acc_y"], values["acc_z"] = acc
+            if sw is not None:
+                values["status_word"] = float(sw)
+            return Reading(self.name, t_host, values, _NO_INVALID, stf * SAMPLE_TIME_FINE_S)
         if self._prev_frame is not None:
             # This device sends the configured packet; one with other or missing items is
             # a corrupted frame that happened to pass the checksum.
@@ -422,17 +458,16 @@ class MtiSerialDriver(Driver):
             values["status_word"] = float(v)
         if not values:
             return None
-        invalid = _NO_INVALID if len(values) == len(VALUE_KEYS) else frozenset(
-            k for k in VALUE_KEYS if k not in values)
+        invalid = frozenset(k for k in self.value_keys if k not in values)
         return Reading(device=self.name, t_host=t_host, values=values, invalid=invalid,
                        t_device=stf * SAMPLE_TIME_FINE_S if stf is not None else None)
 
     MAX_GAP = 50
     """Packets a frame may follow the previous one by (dropped ones in between)."""
 
-    def _consistent(self, pc: int, stf: int, e: tuple[float, ...], g: tuple[float, ...],
-                    acc: tuple[float, ...], q: tuple[float, ...] | None = None,
-                    sw: int = 0) -> bool:
+    def _consistent(self, pc: int, stf: int, e: tuple[float, ...],
+                    g: tuple[float, ...] | None, acc: tuple[float, ...] | None,
+                    q: tuple[float, ...] | None = None, sw: int | None = 0) -> bool:
         """Does the frame agree with itself and with the one before? The Xbus checksum is
         one byte, so about 1 in 256 corrupted frames pass it; what the frame carries
         catches them: the Euler angles and the quaternion (when both are sent) must be
@@ -442,18 +477,25 @@ class MtiSerialDriver(Driver):
         bits clear and its self-test bit unchanged, and the angles cannot jump
         further than the measured rate of turn allows (with 2 deg of slack: a real
         MTi-G-710's filter corrects its angles in steps of up to 0.4 deg, fixture
-        ``xsens-mti-g710``). A frame that fails is counted and dropped; it still becomes
-        the reference, so after a real reset of the device one frame is lost, not all.
+        ``xsens-mti-g710``; without a rate of turn, :data:`GYR_MAX`). The items not
+        configured (``g``, ``acc``, ``sw`` None) are not checked. A frame that fails is
+        counted and dropped; it still becomes the reference, so after a real reset of the
+        device one frame is lost, not all.
         :func:`drivers.xsens.serial_span.consistent` is this rule on columns."""
+        if sw is None:
+            sw = 0
         prev, self._prev_frame = self._prev_frame, (pc, stf, (e[0], e[1], e[2]), sw)
         # (a NaN fails every comparison, so each bound is written to hold, not to fail)
         if not (abs(e[0]) <= 180.0 and abs(e[1]) <= 90.0 and abs(e[2]) <= 180.0
-                and abs(g[0]) <= GYR_MAX and abs(g[1]) <= GYR_MAX and abs(g[2]) <= GYR_MAX
-                and abs(acc[0]) <= ACC_MAX and abs(acc[1]) <= ACC_MAX
-                and abs(acc[2]) <= ACC_MAX and not sw & STATUS_RESERVED):
+                and (g is None or (abs(g[0]) <= GYR_MAX and abs(g[1]) <= GYR_MAX
+                                   and abs(g[2]) <= GYR_MAX))
+                and (acc is None or (abs(acc[0]) <= ACC_MAX and abs(acc[1]) <= ACC_MAX
+                                     and abs(acc[2]) <= ACC_MAX))
+                and not sw & STATUS_RESERVED):
             return self._inconsistent()
-        for v in (e, g, acc) if q is None else (e, g, acc, q):
-            if 0.0 < abs(v[0]) < TINY or 0.0 < abs(v[1]) < TINY or 0.0 < abs(v[2]) < TINY:
+        for v in (e, g, acc, q):
+            if v is not None and (0.0 < abs(v[0]) < TINY or 0.0 < abs(v[1]) < TINY
+                                  or 0.0 < abs(v[2]) < TINY):
                 return self._inconsistent()
         if q is not None and (0.0 < abs(q[3]) < TINY or not orientations_agree(e, q)):
             return self._inconsistent()
@@ -468,7 +510,8 @@ class MtiSerialDriver(Driver):
                 or (sw ^ prev[3]) & STATUS_SELFTEST):
             return self._inconsistent()
         # 2 deg of slack, plus three times what the fastest measured rate could turn
-        limit = 2.0 + 3.0 * 57.3 * max(abs(g[0]), abs(g[1]), abs(g[2])) * dt
+        gmax = GYR_MAX / 3.0 if g is None else max(abs(g[0]), abs(g[1]), abs(g[2]))
+        limit = 2.0 + 3.0 * 57.3 * gmax * dt
         for a, b in zip(e, prev[2], strict=False):
             if abs((a - b + 180.0) % 360.0 - 180.0) > limit:
                 return self._inconsistent()

@@ -33,7 +33,6 @@ from drivers.xsens.serial_driver import (
     STATUS_RESERVED,
     STATUS_SELFTEST,
     TINY,
-    VALUE_KEYS,
     MtiSerialDriver,
     orientations_agree,
 )
@@ -52,26 +51,32 @@ def _pymax3(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     return np.where(c > m, c, m)
 
 
-def consistent(e: np.ndarray, g: np.ndarray, acc: np.ndarray, q: np.ndarray | None,
-               pc: np.ndarray, stf: np.ndarray, prev: tuple[Any, ...] | None, rate: float,
-               max_gap: int, sw: np.ndarray | None = None) -> np.ndarray:
+def consistent(e: np.ndarray, g: np.ndarray | None, acc: np.ndarray | None,
+               q: np.ndarray | None, pc: np.ndarray, stf: np.ndarray,
+               prev: tuple[Any, ...] | None, rate: float, max_gap: int,
+               sw: np.ndarray | None = None) -> np.ndarray:
     """``MtiSerialDriver._consistent`` of consecutive frames (each one's previous frame is
     the row before; the first one's is ``prev``), the same rules in the same order.
-    ``sw`` (the status words) defaults to all zero."""
+    Items not configured are None; ``sw`` (the status words) then counts as all zero."""
     n = len(pc)
     if sw is None:
         sw = np.zeros(n, np.int64)
     ok = ((np.abs(e[:, 0]) <= 180.0) & (np.abs(e[:, 1]) <= 90.0) & (np.abs(e[:, 2]) <= 180.0)
-          & (np.abs(g) <= GYR_MAX).all(axis=1) & (np.abs(acc) <= ACC_MAX).all(axis=1)
           & ((sw & STATUS_RESERVED) == 0))
-    for v in (e, g, acc) if q is None else (e, g, acc, q):
-        a = np.abs(v)
-        ok &= ~((a > 0.0) & (a < TINY)).any(axis=1)
+    if g is not None:
+        ok &= (np.abs(g) <= GYR_MAX).all(axis=1)
+    if acc is not None:
+        ok &= (np.abs(acc) <= ACC_MAX).all(axis=1)
+    for v in (e, g, acc, q):
+        if v is not None:
+            a = np.abs(v)
+            ok &= ~((a > 0.0) & (a < TINY)).any(axis=1)
     if q is not None:
         ok &= _agree(e, q)
     if n == 0:
         return ok
-    gmax = _pymax3(np.abs(g[:, 0]), np.abs(g[:, 1]), np.abs(g[:, 2]))
+    gmax = (np.full(n, GYR_MAX / 3.0) if g is None
+            else _pymax3(np.abs(g[:, 0]), np.abs(g[:, 1]), np.abs(g[:, 2])))
     ppc, pstf, pe = np.empty(n, np.int64), np.empty(n, np.int64), np.empty((n, 3))
     psw = np.empty(n, np.int64)
     ppc[1:], pstf[1:], pe[1:], psw[1:] = pc[:-1], stf[:-1], e[:-1], sw[:-1]
@@ -109,8 +114,8 @@ def _agree(e: np.ndarray, q: np.ndarray) -> np.ndarray:
 
 @dataclass
 class SpanRead(SpanResult):
-    """The MTi's span reads: each of :data:`VALUE_KEYS` per emitted reading (every one
-    valid)."""
+    """The MTi's span reads: each of the driver's ``value_keys`` per emitted reading
+    (every one valid)."""
 
     cum: dict[str, np.ndarray]
     """Per tick: ``messages``, ``bad_frames``, ``dropped_packets`` added so far, and the
@@ -145,6 +150,10 @@ class MtiSpanReader:
         self.period = period
         self.stream = RecordedStream(port)
         self._layouts: dict[bytes, FrameLayout] = {}
+        self._keys = tuple(k for k, want in zip(KEYS, (
+            True, driver._want_g, driver._want_acc, True, True, driver._want_sw,
+            driver._redundant), strict=True) if want)
+        """The items of the driver's configured packet."""
 
     def usable(self) -> bool:
         """Whether a span read can start now (connected, nothing unread on the port)."""
@@ -163,15 +172,16 @@ class MtiSpanReader:
         run = clean_run(buf, d._parser.max_payload, self._layouts)
         if run is None:
             return None
-        fields = run.layout.fields_of(KEYS + ((XDI.QUATERNION,) if d._redundant else ()))
+        fields = run.layout.fields_of(self._keys)
         ids = run.layout.ids
         if fields is None or ids is None or not ids <= d._ids:
             return None  # not the configured packet: the per-tick read drops it
         rows, length = run.rows, run.layout.length
         cols = {k: FrameLayout.column(rows, f) for k, f in fields.items()}
-        e, g, acc = cols[XDI.EULER_ANGLES], cols[XDI.RATE_OF_TURN], cols[XDI.ACCELERATION]
-        pc, stf, sw = (cols[XDI.PACKET_COUNTER], cols[XDI.SAMPLE_TIME_FINE],
-                       cols[XDI.STATUS_WORD])
+        e, g, acc = (cols[XDI.EULER_ANGLES], cols.get(XDI.RATE_OF_TURN),
+                     cols.get(XDI.ACCELERATION))
+        pc, stf = cols[XDI.PACKET_COUNTER], cols[XDI.SAMPLE_TIME_FINE]
+        sw = cols.get(XDI.STATUS_WORD)
         rate = float(d.health.extra.get("output_rate_hz") or d.rate_hz)
         ok = consistent(e, g, acc, cols.get(XDI.QUATERNION), pc, stf, d._prev_frame, rate,
                         d.MAX_GAP, sw)
@@ -193,9 +203,9 @@ class MtiSpanReader:
 
     def _commit(self, k0: int, nt: int, tk: np.ndarray, j: np.ndarray, rel: np.ndarray,
                 buf: np.ndarray, run: Run, nf: int, ok: np.ndarray,
-                cols: dict[int, np.ndarray], e: np.ndarray, g: np.ndarray, acc: np.ndarray,
-                pc: np.ndarray, stf: np.ndarray, sw: np.ndarray,
-                last_valid: np.ndarray) -> SpanRead:
+                cols: dict[int, np.ndarray], e: np.ndarray, g: np.ndarray | None,
+                acc: np.ndarray | None, pc: np.ndarray, stf: np.ndarray,
+                sw: np.ndarray | None, last_valid: np.ndarray) -> SpanRead:
         """Leave the driver, its parser and the port as the reads of ``nt`` ticks would."""
         d, port = self.driver, self.port
         h = d.health
@@ -219,7 +229,7 @@ class MtiSpanReader:
             d._prev_counter = int(counters[-1])
         if nf:
             d._prev_frame = (int(pc[nf - 1]), int(stf[nf - 1]), tuple(e[nf - 1].tolist()),
-                             int(sw[nf - 1]))
+                             0 if sw is None else int(sw[nf - 1]))
         em_tick = arrive[em]
         per_tick = {"messages": np.bincount(em_tick, minlength=nt)[:nt],
                     "bad_frames": np.bincount(arrive[~ok], minlength=nt)[:nt],
@@ -239,11 +249,16 @@ class MtiSpanReader:
         sniffer._buf = bytearray(buf[nf * run.layout.length:rel[nt - 1]].tobytes())
         sniffer.frames += nf
         port.advance(int(j[nt - 1]))
-        vals = (e[:, 0], e[:, 1], e[:, 2], g[:, 0], g[:, 1], g[:, 2], acc[:, 0], acc[:, 1],
-                acc[:, 2], pc.astype(float), stf.astype(float), sw.astype(float))
+        vals = {"roll_deg": e[:, 0], "pitch_deg": e[:, 1], "yaw_deg": e[:, 2],
+                "packet_counter": pc.astype(float), "sample_time_fine": stf.astype(float)}
+        if g is not None:
+            vals["gyr_x"], vals["gyr_y"], vals["gyr_z"] = g[:, 0], g[:, 1], g[:, 2]
+        if acc is not None:
+            vals["acc_x"], vals["acc_y"], vals["acc_z"] = acc[:, 0], acc[:, 1], acc[:, 2]
+        if sw is not None:
+            vals["status_word"] = sw.astype(float)
         every = len(em) == nf  # the usual case: views, no copies
-        values = {k: v[:nf] if every else v[:nf][em]
-                  for k, v in zip(VALUE_KEYS, vals, strict=True)}
+        values = {k: vals[k][:nf] if every else vals[k][:nf][em] for k in d.value_keys}
         return SpanRead(k0, nt, k0 + em_tick, values, j[:nt] >= self.stream.chunk_count, base,
                         cum)
 

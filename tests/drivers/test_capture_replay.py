@@ -172,31 +172,38 @@ def test_mti_serial_handshake_is_answered_from_the_recording(tmp_path: Path) -> 
 
 
 def test_an_mti_capture_from_before_the_quaternion_replays_as_recorded(tmp_path: Path) -> None:
-    """Captures name the MTi's orientation output; one that does not was recorded when
-    the driver asked for Euler angles alone, and must be configured so on replay (the
-    default now also asks for the quaternion, which such a recording never acknowledged)."""
+    """Captures name the MTi's orientation and extra outputs; one that does not was
+    recorded when the driver asked for Euler angles alone, with the rate of turn, the
+    acceleration and the status word, and must be configured so on replay (the default
+    now asks for the quaternion and none of the three, which such a recording never
+    acknowledged)."""
     mti = pytest.importorskip("hil_fixtures.mti")
-    from drivers.xsens.serial_driver import MtiSerialDriver
+    from drivers.xsens.serial_driver import EXTRA_OUTPUTS, MtiSerialDriver
 
     out = tmp_path / "c"
     with mti.MtiEmulator(lambda t: (0.0, 10.0 + t, 20.0)) as emu:
         cfg = {"devices": {"mti": {"kind": "mti_serial", "port": emu.port,
-                                   "orientation": "euler"}}}
+                                   "orientation": "euler",
+                                   "extra_outputs": list(EXTRA_OUTPUTS)}}}
         Recorder(cfg, out).run(0.6)
     with mti.MtiEmulator(lambda t: (0.0, 10.0 + t, 20.0)) as emu:
         Recorder({"devices": {"mti": {"kind": "mti_serial", "port": emu.port}}},
                  tmp_path / "new").run(0.3)
-    assert read_capture(tmp_path / "new").devices["mti"].settings["config"][
-        "orientation"] == "euler+quaternion"  # recorded even though it is the default
+    new = read_capture(tmp_path / "new").devices["mti"].settings["config"]
+    # recorded even though they are the defaults
+    assert (new["orientation"], new["extra_outputs"]) == ("euler+quaternion", [])
     mpath = out / "manifest.json"
     m = json.loads(mpath.read_text())
     del m["devices"]["mti"]["config"]["orientation"]
+    del m["devices"]["mti"]["config"]["extra_outputs"]
     mpath.write_text(json.dumps(m))
-    assert read_capture(out).devices["mti"].settings["config"]["orientation"] == "euler"
+    old = read_capture(out).devices["mti"].settings["config"]
+    assert (old["orientation"], old["extra_outputs"]) == ("euler", list(EXTRA_OUTPUTS))
     with open_replay(out, speed=None) as s:
         got = replay_through(s, {"mti": lambda c: MtiSerialDriver.from_config(
             {k: v for k, v in c.items() if k != "kind"}, clock=s.clock)})
     assert len(got["mti"]) > 20
+    assert all("gyr_z" in r.values and "status_word" in r.values for r in got["mti"])
 
 
 def test_can_replay_through_python_can_virtual_bus(tmp_path: Path) -> None:

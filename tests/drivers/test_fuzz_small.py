@@ -15,7 +15,11 @@ import fuzz  # noqa: E402
 
 from drivers.xsens.mtdata2 import XDI, encode_mtdata2  # noqa: E402
 from drivers.xsens.orientation import euler_deg_to_quat  # noqa: E402
-from drivers.xsens.serial_driver import MtiSerialDriver, orientations_agree  # noqa: E402
+from drivers.xsens.serial_driver import (  # noqa: E402
+    EXTRA_OUTPUTS,
+    MtiSerialDriver,
+    orientations_agree,
+)
 
 
 @pytest.mark.parametrize("parser", fuzz.PARSERS)
@@ -49,7 +53,8 @@ def frame(pc: int, stf: int, euler: tuple[float, float, float] = (1.0, -44.5, 3.
 @pytest.mark.parametrize("orientation", ["euler", "euler+quaternion"])
 def test_frames_that_disagree_with_themselves_or_the_last_are_dropped(orientation: str) -> None:
     drv = MtiSerialDriver.from_config({"port": "/dev/null", "rate_hz": 100,
-                                       "orientation": orientation})
+                                       "orientation": orientation,
+                                       "extra_outputs": list(EXTRA_OUTPUTS)})
     both = orientation == "euler+quaternion"
 
     def f(pc: int, stf: int, euler: tuple[float, float, float] = (1.0, -44.5, 3.0),
@@ -76,7 +81,8 @@ def test_frames_that_disagree_with_themselves_or_the_last_are_dropped(orientatio
 def test_euler_angles_that_disagree_with_the_quaternion_are_dropped() -> None:
     """Sent both, a corruption of either that passes the checksum and every continuity
     check (0.02 deg is well inside the 2 deg a real filter may step) still shows."""
-    drv = MtiSerialDriver.from_config({"port": "/dev/null"})
+    drv = MtiSerialDriver.from_config({"port": "/dev/null",
+                                       "extra_outputs": list(EXTRA_OUTPUTS)})
     e = (1.0, -44.5, 3.0)
     q = euler_deg_to_quat(*e)
     assert drv.decode(frame(10, 1000, e, quat=q)) is not None
@@ -87,6 +93,31 @@ def test_euler_angles_that_disagree_with_the_quaternion_are_dropped() -> None:
     # float32 rounding of either encoding is far inside the agreement
     assert drv.decode(frame(15, 1500, (1.0, -44.5, 3.004), quat=q)) is not None
     assert drv.health.extra["inconsistent_frames"] == 3
+
+
+def test_the_orientation_alone_is_checked_without_a_rate_of_turn() -> None:
+    """The default packet: counter, sample time and both orientations, nothing the loop
+    does not use. An angle may then jump as far as the fastest rate the family
+    measures (35 rad/s) turns in the time between the frames, plus the 2 deg slack."""
+    drv = MtiSerialDriver.from_config({"port": "/dev/null", "rate_hz": 100})
+    assert [x & 0xFFF0 for x, _ in drv.requested_outputs()] == [
+        XDI.PACKET_COUNTER, XDI.SAMPLE_TIME_FINE, XDI.EULER_ANGLES, XDI.QUATERNION]
+
+    def f(pc: int, stf: int, euler: tuple[float, float, float] = (1.0, -44.5, 3.0)) -> bytes:
+        return encode_mtdata2([(XDI.PACKET_COUNTER, pc), (XDI.SAMPLE_TIME_FINE, stf),
+                               (XDI.EULER_ANGLES, euler),
+                               (XDI.QUATERNION, euler_deg_to_quat(*euler))])
+
+    r = drv.decode(f(10, 1000))
+    assert r is not None and sorted(r.values) == sorted(
+        ["roll_deg", "pitch_deg", "yaw_deg", "packet_counter", "sample_time_fine"])
+    assert not r.invalid
+    assert drv.decode(f(11, 1100, (1.0, -30.0, 3.0))) is not None  # 14.5 deg: < 22 deg
+    assert drv.decode(f(12, 1200, (1.0, -60.0, 3.0))) is None  # 30 deg in 10 ms
+    assert drv.decode(f(13, 1300, (1.0, -60.0, 3.0))) is not None
+    assert drv.decode(f(14, 1400, (1.0, -60.01, 3.0))[:-4] + b"\0\0\0\0") is None  # q
+    assert drv.decode(frame(15, 1500, quat=euler_deg_to_quat(1.0, -44.5, 3.0))) is None
+    assert drv.health.extra["inconsistent_frames"] == 3  # (the last: not its packet)
 
 
 @pytest.mark.parametrize("e", [(0.0, 89.9, 30.0), (179.99, 0.0, -179.99), (-120.0, -60.0, 90.0)])

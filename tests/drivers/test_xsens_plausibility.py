@@ -34,6 +34,7 @@ from drivers.xsens.mtdata2 import (  # noqa: E402
 )
 from drivers.xsens.orientation import euler_deg_to_quat  # noqa: E402
 from drivers.xsens.serial_driver import (  # noqa: E402
+    EXTRA_OUTPUTS,
     STATUS_RESERVED,
     TINY,
     MtiSerialDriver,
@@ -118,7 +119,8 @@ def _capture(orientation: str) -> tuple[MtiSerialDriver, list[bytes]]:
     if orientation == "euler+quaternion":
         payloads = [p + encode_item(XDI.QUATERNION, euler_deg_to_quat(
             *mtdata2_values(p)[XDI.EULER_ANGLES])) for p in payloads]
-    return MtiSerialDriver(orientation=orientation), payloads
+    # the emulator was asked for its rate of turn, acceleration and status word too
+    return MtiSerialDriver(orientation=orientation, extra_outputs=EXTRA_OUTPUTS), payloads
 
 
 def _replace(payload: bytes, xdi: int, value: bytes, at: int = 0) -> bytes:

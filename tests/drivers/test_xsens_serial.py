@@ -19,7 +19,7 @@ import pytest
 from drivers.base import DeviceError, Reading
 from drivers.xsens.mtdata2 import FP1632, MAX_FREQUENCY, NED, XDI
 from drivers.xsens.orientation import gravity_in_sensor
-from drivers.xsens.serial_driver import MtiSerialDriver
+from drivers.xsens.serial_driver import EXTRA_OUTPUTS, MtiSerialDriver
 from drivers.xsens.xbus import MID
 from hil_fixtures.mti import MtiEmulator, angles_from_signals
 from shoveld.installation import Installation, wrap_deg
@@ -61,6 +61,9 @@ def test_configuration_sequence_and_identity(emu: MtiEmulator) -> None:
         assert sorted(emu.outputs) == sorted(drv.requested_outputs())
         assert dict(emu.outputs)[XDI.EULER_ANGLES] == 100
         assert dict(emu.outputs)[XDI.PACKET_COUNTER] == MAX_FREQUENCY
+        # by default the orientation (twice, to check one by the other) and its clock
+        assert sorted(x & 0xFFF0 for x, _ in emu.outputs) == sorted(
+            [XDI.PACKET_COUNTER, XDI.SAMPLE_TIME_FINE, XDI.EULER_ANGLES, XDI.QUATERNION])
         # the identifiers its frames are checked against: those it acknowledged
         assert drv._ids == frozenset(x for x, _ in emu.outputs)
         assert drv.health.extra["device_id"] == "06301234"
@@ -75,7 +78,8 @@ def test_configuration_sequence_and_identity(emu: MtiEmulator) -> None:
 def test_streaming_values_match_the_source(emu: MtiEmulator, precision: str, tol: float) -> None:
     # float64 Euler angles and quaternion at 100 Hz need more than 115200 baud
     emu.baudrate = 230400 if precision == "float64" else 115200
-    drv = make_driver(emu.port, precision=precision, baudrate=emu.baudrate)
+    drv = make_driver(emu.port, precision=precision, baudrate=emu.baudrate,
+                      extra_outputs=list(EXTRA_OUTPUTS))
     drv.open()
     readings = collect(drv, 0.35)
     drv.close()
@@ -292,6 +296,9 @@ def test_unopenable_port() -> None:
     ({"port": "/dev/x", "baudrate": "fast"}, "baudrate"),
     ({"port": "/dev/x", "rate_hz": 0}, "rate_hz"),
     ({"port": "/dev/x", "orientation": "matrix"}, "orientation"),
+    ({"port": "/dev/x", "extra_outputs": ["gyro"]}, "extra_outputs"),
+    ({"port": "/dev/x", "extra_outputs": "rate_of_turn"}, "extra_outputs"),
+    ({"port": "/dev/x", "extra_outputs": ["acceleration", "acceleration"]}, "extra_outputs"),
     ({"port": "/dev/x", "precision": "float16"}, "precision"),
     ({"port": "/dev/x", "coordinate_frame": "XYZ"}, "coordinate_frame"),
     ({"port": "/dev/x", "data_timeout_s": -1}, "data_timeout_s"),
@@ -307,10 +314,16 @@ def test_from_config_accepts_a_full_config() -> None:
     drv = MtiSerialDriver.from_config({
         "name": "arm", "port": "/dev/ttyUSB3", "baudrate": 921600, "rate_hz": 50,
         "orientation": "quaternion", "precision": "fp1220", "coordinate_frame": "NWU",
+        "extra_outputs": ["status_word", "rate_of_turn"],
         "stopbits": 2, "command_timeout_s": 2, "data_timeout_s": 0.5, "read_timeout_s": 0.02,
         "backoff_s": [0.5, 10]})
     assert drv.name == "arm" and drv.backoff_s == (0.5, 10.0)
     assert (XDI.QUATERNION | 0x8 | 0x1, 50) in drv.requested_outputs()
+    assert {x & 0xFFF0 for x, _ in drv.requested_outputs()} == {
+        XDI.PACKET_COUNTER, XDI.SAMPLE_TIME_FINE, XDI.QUATERNION, XDI.RATE_OF_TURN,
+        XDI.STATUS_WORD}
+    assert drv.value_keys == ("roll_deg", "pitch_deg", "yaw_deg", "gyr_x", "gyr_y", "gyr_z",
+                              "packet_counter", "sample_time_fine", "status_word")
 
 
 def test_pty_pair_is_binary_clean_and_shows_the_baud_rate() -> None:

@@ -20,7 +20,7 @@ from drivers.base import DriverHealth, Reading
 from drivers.capture.format import read_capture
 from drivers.xsens.bulk import FrameLayout, clean_run
 from drivers.xsens.mtdata2 import FP1632, PRECISION_BY_NAME, XDI
-from drivers.xsens.serial_driver import VALUE_KEYS, MtiSerialDriver
+from drivers.xsens.serial_driver import EXTRA_OUTPUTS, VALUE_KEYS, MtiSerialDriver
 from drivers.xsens.serial_span import MtiSpanReader, consistent
 from drivers.xsens.xbus import MID, encode_frame
 from hil_fixtures.mti import MtiEmulator
@@ -51,8 +51,9 @@ def _play(driver: MtiSerialDriver, port: MemorySerial, clock: StepClock, ticks: 
 
     def span_rows(got: Any) -> None:
         for i, tick in enumerate(got.reading_ticks.tolist()):
-            readings.append((tick, tick * PERIOD, tuple(float(got.values[key][i])
-                                                        for key in VALUE_KEYS), ()))
+            readings.append((tick, tick * PERIOD, tuple(
+                float(got.values[key][i]) if key in got.values else "-"
+                for key in VALUE_KEYS), ()))
 
     dev = SyncDevice("mti", driver, port, sink, clock)
     reader = MtiSpanReader(driver, port, PERIOD) if window else None
@@ -90,7 +91,10 @@ def _resum(data: bytearray, start: int, length: int) -> None:
 
 def _put(data: bytearray, f: int, lay: FrameLayout, xdi: int, value: bytes, at: int = 0,
          ) -> None:
-    """Overwrite bytes of an item (at byte ``at`` of it) and fix the checksum."""
+    """Overwrite bytes of an item (at byte ``at`` of it) and fix the checksum; nothing if
+    the layout does not have the item."""
+    if xdi not in lay.fields:
+        return
     off = f + lay.fields[xdi].offset + at
     data[off:off + len(value)] = value
     _resum(data, f, lay.length)
@@ -174,14 +178,17 @@ def test_span_reads_of_the_undamaged_capture_read_nearly_everything() -> None:
     assert drv.health.messages > 1900
 
 
-def _synthetic(precision: str, extended: bool = False
+def _synthetic(precision: str, extended: bool = False,
+               extras: tuple[str, ...] = EXTRA_OUTPUTS,
                ) -> tuple[MtiSerialDriver, MemorySerial, StepClock]:
-    """A measuring MTi with Euler angles and quaternion in one packet, its stream made by
-    the emulator (two chunks per frame, sometimes two frames per chunk; ``extended``:
-    every frame with the extended length header, which the parser accepts too)."""
+    """A measuring MTi with Euler angles and quaternion in one packet (and ``extras``),
+    its stream made by the emulator (two chunks per frame, sometimes two frames per
+    chunk; ``extended``: every frame with the extended length header, which the parser
+    accepts too)."""
     clock = StepClock()
     drv = MtiSerialDriver(name="mti", orientation="euler+quaternion", precision=precision,
-                          baudrate=921600, clock=clock, timeout_clock=clock)
+                          extra_outputs=extras, baudrate=921600, clock=clock,
+                          timeout_clock=clock)
     emu = MtiEmulator(lambda t: (5 * math.sin(t), 30 * math.cos(t / 3), (70 * t) % 360 - 180),
                       outputs=tuple(drv.requested_outputs()))
     try:
@@ -208,15 +215,20 @@ def _layout_of(frames: bytes, extended: bool = False) -> FrameLayout:
     return FrameLayout(np.frombuffer(frames[fs[0]:fs[1]], np.uint8), 6 if extended else 4)
 
 
-@pytest.mark.parametrize(("precision", "extended"), [
-    ("float32", False), ("fp1632", False), ("fp1220", False), ("float64", False),
-    ("float32", True)])
-def test_span_reads_match_per_tick_reads_with_the_quaternion(precision: str,
-                                                             extended: bool) -> None:
-    a = _play(*_synthetic(precision, extended), 1400, None)
-    b = _play(*_synthetic(precision, extended), 1400, 64)
+@pytest.mark.parametrize(("precision", "extended", "extras"), [
+    ("float32", False, EXTRA_OUTPUTS), ("fp1632", False, EXTRA_OUTPUTS),
+    ("fp1220", False, EXTRA_OUTPUTS), ("float64", False, EXTRA_OUTPUTS),
+    ("float32", True, EXTRA_OUTPUTS), ("float32", False, ()), ("fp1632", True, ())])
+def test_span_reads_match_per_tick_reads_with_the_quaternion(
+        precision: str, extended: bool, extras: tuple[str, ...]) -> None:
+    """With the rate of turn, acceleration and status word, and without (the default:
+    their damage then has nothing to hit)."""
+    a = _play(*_synthetic(precision, extended, extras), 1400, None)
+    b = _play(*_synthetic(precision, extended, extras), 1400, 64)
     h = a[1][-1]
     assert h["inconsistent_frames"] >= 2 and h["bad_frames"] >= 6
+    if not extras:  # no rate of turn in any reading (VALUE_KEYS[3] is gyr_x)
+        assert all(r[2][3] == "-" for r in a[0])
     assert len(a[0]) > 1300
     assert a[0] == b[0]
     assert a[1] == b[1]
