@@ -293,6 +293,14 @@ def test_consistency_rule_on_columns_is_the_drivers() -> None:
     got = consistent(e, g, acc, q, pc, stf, None, 100.0, drv.MAX_GAP, sw)
     assert got.tolist() == want
     assert 0.1 < float(np.mean(want)) < 0.9
+    # the default packet: no rate of turn, acceleration or status word to check
+    drv._prev_frame = None
+    want = [drv._consistent(int(pc[i]), int(stf[i]), tuple(e[i].tolist()), None, None,
+                            tuple(q[i].tolist()), None)
+            for i in range(n)]
+    got = consistent(e, None, None, q, pc, stf, None, 100.0, drv.MAX_GAP, None)
+    assert got.tolist() == want
+    assert 0.1 < float(np.mean(want)) < 0.95
 
 
 def _quat(r: float, p: float, y: float) -> tuple[float, ...]:
