@@ -472,7 +472,7 @@ class MtiSerialDriver(Driver):
         one byte, so about 1 in 256 corrupted frames pass it; what the frame carries
         catches them: the Euler angles and the quaternion (when both are sent) must be
         one orientation, the packet counter and the 10 kHz sample time must advance
-        together, the values must be finite, in the sensor's range (:data:`GYR_MAX`,
+        together (:func:`sample_time_slack_s`), the values must be finite, in the sensor's range (:data:`GYR_MAX`,
         :data:`ACC_MAX`) and not next to zero (:data:`TINY`), the status word's reserved
         bits clear and its self-test bit unchanged, and the angles cannot jump
         further than the measured rate of turn allows (with 2 deg of slack: a real
@@ -504,9 +504,8 @@ class MtiSerialDriver(Driver):
         n = (pc - prev[0]) & 0xFFFF
         dt = ((stf - prev[1]) & 0xFFFFFFFF) * SAMPLE_TIME_FINE_S
         rate = float(self.health.extra.get("output_rate_hz") or self.rate_hz)
-        # the sample time counts a 10 kHz clock and the output rates divide it: packets
-        # n apart are n/rate apart to the tick (1.5 ticks for the rounding of odd rates)
-        if (not 1 <= n <= self.MAX_GAP or abs(dt - n / rate) > 1.5 * SAMPLE_TIME_FINE_S
+        # the sample time counts a 10 kHz clock: packets n apart are n/rate apart
+        if (not 1 <= n <= self.MAX_GAP or abs(dt - n / rate) > sample_time_slack_s(rate)
                 or (sw ^ prev[3]) & STATUS_SELFTEST):
             return self._inconsistent()
         # 2 deg of slack, plus three times what the fastest measured rate could turn
@@ -541,6 +540,16 @@ class MtiSerialDriver(Driver):
                 ser.close()
             except (OSError, serial.SerialException):
                 pass
+
+
+def sample_time_slack_s(rate: float) -> float:
+    """How far two packets' sample times may be from ``n / rate`` apart: half a tick
+    (so: exactly) where a period is a whole number of 10 kHz ticks, as for every rate
+    that divides the MTi's 400 Hz (a real MTi-G-710 at 100 Hz: 100 ticks between
+    every two packets of fixtures ``xsens-mti-g710/1``, ``/3`` and ``/5``); otherwise
+    1.5 ticks, for the rounding of a period that is not."""
+    ticks = round(1.0 / SAMPLE_TIME_FINE_S) / rate  # 10000 / rate, exact where whole
+    return (0.5 if ticks == round(ticks) else 1.5) * SAMPLE_TIME_FINE_S
 
 
 def orientations_agree(e: tuple[float, ...], q: tuple[float, ...],

@@ -35,6 +35,7 @@ from drivers.xsens.serial_driver import (
     TINY,
     MtiSerialDriver,
     orientations_agree,
+    sample_time_slack_s,
 )
 
 log = logging.getLogger(__name__)
@@ -85,7 +86,7 @@ def consistent(e: np.ndarray, g: np.ndarray | None, acc: np.ndarray | None,
     steps = (pc - ppc) & 0xFFFF
     dt = ((stf - pstf) & 0xFFFFFFFF) * SAMPLE_TIME_FINE_S
     chain = ((1 <= steps) & (steps <= max_gap)
-             & ~(np.abs(dt - steps / rate) > 1.5 * SAMPLE_TIME_FINE_S)
+             & ~(np.abs(dt - steps / rate) > sample_time_slack_s(rate))
              & (((sw ^ psw) & STATUS_SELFTEST) == 0))
     limit = 2.0 + 3.0 * 57.3 * gmax * dt
     for a in range(3):

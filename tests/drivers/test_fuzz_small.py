@@ -120,6 +120,27 @@ def test_the_orientation_alone_is_checked_without_a_rate_of_turn() -> None:
     assert drv.health.extra["inconsistent_frames"] == 3  # (the last: not its packet)
 
 
+def test_the_sample_time_advances_to_the_tick_where_a_period_is_whole_ticks() -> None:
+    """At 100 Hz a real MTi's packets are exactly 100 ticks of its 10 kHz clock apart, so
+    a sample time one tick off is a corrupted one; at 30 Hz a period is 333.3 ticks and
+    the device rounds it, 333 or 334."""
+    def f(pc: int, stf: int) -> bytes:
+        e = (1.0, -44.5, 3.0)
+        return encode_mtdata2([(XDI.PACKET_COUNTER, pc), (XDI.SAMPLE_TIME_FINE, stf),
+                               (XDI.EULER_ANGLES, e), (XDI.QUATERNION, euler_deg_to_quat(*e))])
+
+    drv = MtiSerialDriver.from_config({"port": "/dev/null", "rate_hz": 100})
+    assert drv.decode(f(10, 1000)) is not None
+    assert drv.decode(f(11, 1101)) is None  # one tick late
+    assert drv.decode(f(12, 1200)) is None  # (checked against the one before)
+    assert drv.decode(f(13, 1300)) is not None
+    assert drv.decode(f(15, 1500)) is not None  # a packet lost: two periods exactly
+    odd = MtiSerialDriver.from_config({"port": "/dev/null", "rate_hz": 30})
+    assert all(odd.decode(f(10 + i, 1000 + t)) is not None
+               for i, t in enumerate((0, 333, 667, 1000, 1333, 1667, 2000)))
+    assert odd.decode(f(17, 2335)) is None  # 2 ticks off 333.3
+
+
 @pytest.mark.parametrize("e", [(0.0, 89.9, 30.0), (179.99, 0.0, -179.99), (-120.0, -60.0, 90.0)])
 def test_agreement_holds_where_euler_angles_are_singular_or_wrap(
         e: tuple[float, float, float]) -> None:
