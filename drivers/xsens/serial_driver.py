@@ -472,9 +472,10 @@ class MtiSerialDriver(Driver):
         one byte, so about 1 in 256 corrupted frames pass it; what the frame carries
         catches them: the Euler angles and the quaternion (when both are sent) must be
         one orientation, the packet counter and the 10 kHz sample time must advance
-        together (:func:`sample_time_slack_s`), the values must be finite, in the sensor's range (:data:`GYR_MAX`,
-        :data:`ACC_MAX`) and not next to zero (:data:`TINY`), the status word's reserved
-        bits clear and its self-test bit unchanged, and the angles cannot jump
+        together (:func:`sample_time_slack_s`), the values must be finite, in the
+        sensor's range (:data:`GYR_MAX`, :data:`ACC_MAX`) and not next to zero
+        (:data:`TINY`), the status word's reserved bits clear and its self-test bit
+        unchanged, and the angles cannot jump
         further than the measured rate of turn allows (with 2 deg of slack: a real
         MTi-G-710's filter corrects its angles in steps of up to 0.4 deg, fixture
         ``xsens-mti-g710``; without a rate of turn, :data:`GYR_MAX`). The items not
