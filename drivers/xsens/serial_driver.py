@@ -475,10 +475,10 @@ class MtiSerialDriver(Driver):
         together (:func:`sample_time_slack_s`), the values must be finite, in the
         sensor's range (:data:`GYR_MAX`, :data:`ACC_MAX`) and not next to zero
         (:data:`TINY`), the status word's reserved bits clear and its self-test bit
-        unchanged, and the angles cannot jump
-        further than the measured rate of turn allows (with 2 deg of slack: a real
-        MTi-G-710's filter corrects its angles in steps of up to 0.4 deg, fixture
-        ``xsens-mti-g710``; without a rate of turn, :data:`GYR_MAX`). The items not
+        unchanged, and the angles cannot jump further than the measured rate of turn
+        allows (with 2 deg of slack: a real MTi-G-710's filter corrects its angles in
+        steps of up to 0.4 deg, fixture ``xsens-mti-g710``; without a rate of turn,
+        :data:`GYR_MAX`). The items not
         configured (``g``, ``acc``, ``sw`` None) are not checked. A frame that fails is
         counted and dropped; it still becomes the reference, so after a real reset of the
         device one frame is lost, not all.
