@@ -23,7 +23,6 @@ from drivers.xsens.mtdata2 import (
     PRECISION_MASK,
     PRECISION_SIZE,
     TYPE_MASK,
-    XDI,
     iter_packets,
     packet_ids,
 )
@@ -178,8 +177,3 @@ def clean_run(buf: np.ndarray, max_payload: int,
             end = len(buf)
     return Run(rows[:m], lay, end)
 
-
-KEYS = (XDI.EULER_ANGLES, XDI.RATE_OF_TURN, XDI.ACCELERATION, XDI.PACKET_COUNTER,
-        XDI.SAMPLE_TIME_FINE, XDI.STATUS_WORD, XDI.QUATERNION)
-"""Every item :class:`MtiSerialDriver` may configure; which of them it does, its
-``extra_outputs`` and ``orientation`` say."""

@@ -23,8 +23,8 @@ import numpy as np
 
 from drivers.base import DriverHealth
 from drivers.spanio import RecordedStream, SpanResult
-from drivers.xsens.bulk import KEYS, FrameLayout, Run, clean_run
-from drivers.xsens.mtdata2 import XDI
+from drivers.xsens.bulk import FrameLayout, Run, clean_run
+from drivers.xsens.mtdata2 import TYPE_MASK, XDI
 from drivers.xsens.serial_driver import (
     ACC_MAX,
     AGREEMENT_DEG,
@@ -151,10 +151,10 @@ class MtiSpanReader:
         self.period = period
         self.stream = RecordedStream(port)
         self._layouts: dict[bytes, FrameLayout] = {}
-        self._keys = tuple(k for k, want in zip(KEYS, (
-            True, driver._want_g, driver._want_acc, True, True, driver._want_sw,
-            driver._redundant), strict=True) if want)
-        """The items of the driver's configured packet."""
+        self._keys = tuple(dict.fromkeys((XDI.EULER_ANGLES, *(
+            x & TYPE_MASK for x, _ in driver.requested_outputs()))))
+        """The items of the driver's configured packet, and the Euler angles the columns
+        are read from (a packet without them is left to the per-tick read)."""
 
     def usable(self) -> bool:
         """Whether a span read can start now (connected, nothing unread on the port)."""
