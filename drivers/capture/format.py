@@ -607,16 +607,14 @@ def read_capture(path: str | os.PathLike[str]) -> Capture:
             raise CaptureFormatError(mpath, None, f"devices.{name}.file {fname!r} does not exist")
         settings = {k: v for k, v in d.items() if k not in ("kind", "file")}
         cfg = settings.get("config")
-        if kind == "mti_serial" and isinstance(cfg, dict) and "orientation" not in cfg:
-            # recorded before the MTi driver asked for Euler angles and quaternion both
-            # (2026-11-26): the device was sent Euler angles alone
-            cfg = settings["config"] = {**cfg, "orientation": "euler"}
-        if kind == "mti_serial" and isinstance(cfg, dict) and "extra_outputs" not in cfg:
-            # recorded before the MTi was asked for the orientation alone (2026-11-29):
-            # it also sent its rate of turn, acceleration and status word
+        if kind == "mti_serial" and isinstance(cfg, dict):
             from drivers.xsens.serial_driver import RECORDED_BEFORE_EXTRAS
 
-            settings["config"] = {**cfg, "extra_outputs": list(RECORDED_BEFORE_EXTRAS)}
+            # a key the manifest does not name was recorded at the driver's default of
+            # the day: Euler angles alone (until 2026-11-26), with the rate of turn,
+            # acceleration and status word (until 2026-11-29)
+            settings["config"] = {"orientation": "euler",
+                                  "extra_outputs": list(RECORDED_BEFORE_EXTRAS), **cfg}
         out[name] = DeviceEntry(name, kind, fname, settings)
     start = m.get("start_unix", 0.0)
     if isinstance(start, bool) or not isinstance(start, int | float):
