@@ -64,6 +64,8 @@ _OUTPUT_MODE = {"in": 1, "mm": 4}
 _LINE_RE = re.compile(rb"^ *(-?)(\d{1,7})(?:\.(\d{1,4}))? *$")
 
 NO_TARGET = 0.0
+REFERENCE_LINES = 5
+"""Sample intervals for which the last distance used stays the reference for the next."""
 
 
 def parse_line(line: bytes, unit_m: float) -> float | None:
@@ -79,6 +81,13 @@ def parse_line(line: bytes, unit_m: float) -> float | None:
     if value == 0:
         return NO_TARGET
     return (-value if sign else value) * unit_m
+
+
+def follows(value: float, t: float, ref: tuple[float, float], cfg: Ar4000Config) -> bool:
+    """Whether a distance at ``t`` is within what the handle moves from ``ref`` (value,
+    time) in the time between them (at least one sample interval), plus the noise."""
+    return abs(value - ref[0]) <= (cfg.max_speed_mps * max(t - ref[1], cfg.interval_s)
+                                   + cfg.jump_noise_m)
 
 
 class LineSplitter:
@@ -162,6 +171,14 @@ class Ar4000Config:
     """Fraction of malformed lines in the window above which ``babbling`` is reported."""
     max_plausible_m: float = 20.0
     """Distances outside [0, this] are reported invalid (AR4000 range is 16.5 m)."""
+    max_speed_mps: float = 3.0
+    """The fastest the target on the handle moves along the beam. A distance further
+    from the last one used than this speed covers (over the time between them, at least
+    one sample interval) plus ``jump_noise_m`` is a jump, reported invalid: the protocol
+    has no checksum, so a corrupted digit would otherwise be a distance."""
+    jump_noise_m: float = 0.01
+    """What two consecutive lines may differ by at rest (the laser's 3 mm accuracy on
+    each, its 1 mm step)."""
 
     @classmethod
     def from_config(cls, d: Mapping[str, Any]) -> Ar4000Config:
@@ -214,12 +231,19 @@ class Ar4000Config:
             raise bad("max_line_bytes", "must be in 8..1024")
         if self.babble_window < 1 or not 0 < self.babble_ratio <= 1:
             raise bad("babble_ratio", "must be in (0, 1] with babble_window >= 1")
-        if not self.max_plausible_m > 0:
-            raise bad("max_plausible_m", "must be > 0")
+        for key in ("max_plausible_m", "max_speed_mps"):
+            if not getattr(self, key) > 0:
+                raise bad(key, "must be > 0")
+        if not self.jump_noise_m >= 0:
+            raise bad("jump_noise_m", "must be >= 0")
 
     @property
     def unit_m(self) -> float:
         return _UNIT_TO_M[self.units]
+
+    @property
+    def interval_s(self) -> float:
+        return self.sample_interval_us * 1e-6
 
     def commands(self) -> list[bytes]:
         """The configuration commands, in the order they are sent."""
@@ -261,10 +285,20 @@ def _coerce(key: str, v: Any, typ: Any) -> Any:
 class Ar4000Driver(Driver):
     """Reads calibrated distances from an AR4000 and emits ``distance_m`` readings.
 
+    The protocol has no checksum; what stops a corrupted digit is the handle's speed. A
+    distance is used only if it can follow from the last distance used, no further from
+    it than the handle moves in the time between them (``max_speed_mps``, plus
+    ``jump_noise_m``), no-target lines in between or not. After a connection, or
+    :data:`REFERENCE_LINES` sample intervals with none used, there is no such distance:
+    a distance must then follow in the same way from the well-formed line just before
+    it (so the first after a start or a long no-target stretch is reported invalid, and
+    two lines that agree start over wherever the target went).
+
     Health: ``bad_frames`` counts malformed lines, ``rejected_bytes`` their bytes,
     ``timeouts`` silent periods; ``extra`` carries ``no_target`` (zero readings),
-    ``implausible``, ``silent`` and ``babbling`` (malformed fraction of the recent
-    lines above ``babble_ratio``).
+    ``implausible``, ``jumps`` (distances that cannot follow from the last one used),
+    ``silent`` and ``babbling`` (malformed fraction of the recent lines above
+    ``babble_ratio``).
     """
 
     def __init__(self, name: str, config: Ar4000Config,
@@ -285,8 +319,12 @@ class Ar4000Driver(Driver):
         self._pending: list[Reading] = []
         self._last_good = 0.0
         self._garbage_since_good = 0
-        self.health.extra.update({"no_target": 0, "implausible": 0, "silent": False,
-                                  "babbling": False})
+        self._prev: tuple[float, float] | None = None
+        """The last well-formed line's value (metres, 0 for no target) and time."""
+        self._used: tuple[float, float] | None = None
+        """The last distance used and its time."""
+        self.health.extra.update({"no_target": 0, "implausible": 0, "jumps": 0,
+                                  "silent": False, "babbling": False})
 
     @classmethod
     def from_config(cls, name: str, d: Mapping[str, Any], **kw: Any) -> Ar4000Driver:
@@ -305,6 +343,7 @@ class Ar4000Driver(Driver):
             raise DeviceError(f"cannot open AR4000 port {cfg.port}: {e}") from e
         self._splitter.clear()
         self._pending.clear()
+        self._prev = self._used = None  # a new connection: nothing to follow from
         if cfg.configure:
             for cmd in cfg.commands():
                 self._ser.write(cmd)
@@ -359,6 +398,7 @@ class Ar4000Driver(Driver):
             good += 1
             self._remember(True)
             self._garbage_since_good = 0
+            prev, self._prev = self._prev, (value, now)
             if value == NO_TARGET:
                 self.health.extra["no_target"] += 1
                 out(Reading(self.name, now, {}, frozenset({DISTANCE})))
@@ -366,7 +406,16 @@ class Ar4000Driver(Driver):
                 self.health.extra["implausible"] += 1
                 out(Reading(self.name, now, {}, frozenset({DISTANCE})))
             else:
-                out(Reading(self.name, now, {DISTANCE: value}))
+                ref = self._used
+                if ref is None or now - ref[1] > cfg.interval_s * (REFERENCE_LINES + 0.5):
+                    ref = prev if prev is not None and prev[0] != NO_TARGET else None
+                if ref is not None and follows(value, now, ref, cfg):
+                    self._used = (value, now)
+                    out(Reading(self.name, now, {DISTANCE: value}))
+                else:
+                    if ref is not None:
+                        self.health.extra["jumps"] += 1
+                    out(Reading(self.name, now, {}, frozenset({DISTANCE})))
         self._update_babbling()
         return good
 

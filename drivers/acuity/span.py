@@ -4,11 +4,14 @@ Fast replay steps each driver once per 10 ms tick; for the laser that is a line 
 and a regular-expression parse per line in Python. :class:`Ar4000SpanReader` does what
 those reads would do for a run of ticks in one go: the lines each tick completes,
 found with numpy, each distinct line parsed once by the driver's :func:`parse_line`,
-the no-target and implausible rules, the silence timeout and the health counters,
-with the driver's state (line buffer, malformed-line window, last good line) left as
-the reads would leave it. It starts only while the window of recent lines holds no
-malformed one, and stops before the first tick where anything else could happen (a
-malformed, empty or overlong line, a line buffer over its bound, a silence); the
+the rule that a distance follows from the one before it (the driver's
+:func:`~drivers.acuity.ar4000.follows`, in numpy), the
+silence timeout and the health counters, with the driver's state (line buffer,
+malformed-line window, last good line, last distance used) left as the reads would
+leave it. It starts only while the window of recent lines holds no malformed one and
+the last line was a distance used, and stops before the first tick where anything
+else could happen (a malformed, empty or overlong line, a line that is not a distance
+used: no target, implausible, a jump; a line buffer over its bound, a silence); the
 per-tick read takes over there.
 """
 
@@ -20,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from drivers.acuity.ar4000 import DISTANCE, NO_TARGET, Ar4000Driver, parse_line
+from drivers.acuity.ar4000 import DISTANCE, Ar4000Driver, parse_line
 from drivers.base import DriverHealth
 from drivers.spanio import RecordedStream, SpanResult
 
@@ -32,12 +35,12 @@ _MAX_PARSED = 100_000
 
 @dataclass
 class LineSpan(SpanResult):
-    """The AR4000's span reads: a reading per line, ``distance_m`` NaN where the line
-    said no target or was implausible (the reading marks it invalid)."""
+    """The AR4000's span reads: a reading per line, each a distance used (the lines
+    that are not stop the span)."""
 
     cum: dict[str, np.ndarray]
-    """Per tick: ``messages``, ``no_target``, ``implausible`` added so far, and the time
-    of the last line then (NaN: none yet in the span)."""
+    """Per tick: ``messages`` added so far, and the time of the last line then (NaN:
+    none yet in the span)."""
 
     def health_after(self, i: int) -> DriverHealth:
         """A copy of the driver's health as it was after tick ``k0 + i``."""
@@ -48,8 +51,6 @@ class LineSpan(SpanResult):
         if t == t:  # a line by then: not silent, its time the last reading's
             h.last_reading_t = t
             h.extra["silent"] = False
-        h.extra["no_target"] += int(c["no_target"][i])
-        h.extra["implausible"] += int(c["implausible"][i])
         return h
 
 
@@ -86,12 +87,14 @@ class Ar4000SpanReader:
 
     def usable(self) -> bool:
         """Whether a span read can start now (connected, nothing unread or queued, no
-        malformed line in the window, no overlong line being skipped)."""
+        malformed line in the window, no overlong line being skipped, the last line a
+        distance used: the next follows from it)."""
         d = self.driver
         sp = d._splitter
         return (d.health.connected and d._ser is self.port and not self.port.in_waiting
                 and not d._pending and d._recent_bad == 0 and not sp._skipping
-                and not d.health.extra["babbling"] and len(sp._buf) <= sp.max_line)
+                and not d.health.extra["babbling"] and len(sp._buf) <= sp.max_line
+                and d._used is not None and d._used == d._prev)
 
     def read(self, k0: int, k1: int) -> LineSpan | None:
         """Do the reads of ticks ``k0 .. k1 - 1`` (as far as nothing else can happen);
@@ -114,8 +117,19 @@ class Ar4000SpanReader:
             for i in other:
                 v = get(lines[i])
                 vals[i] = self._parse(lines[i]) if v is None else v
-        good = ~np.isnan(vals)
-        bad = np.flatnonzero(~good)
+        # each a distance that follows from the line before it, while all before it are
+        # (the driver's reference is then the line before: see Ar4000Driver._parse)
+        arrive = np.searchsorted(ends, nl + 1, side="left")  # tick index of each line
+        t_line = tk[np.minimum(arrive, len(tk) - 1)]
+        prev = d._prev
+        assert prev is not None  # usable()
+        prev_v = np.concatenate([[prev[0]], vals[:-1]])[:len(vals)]
+        prev_t = np.concatenate([[prev[1]], t_line[:-1]])[:len(vals)]
+        used = ((vals > 0.0) & (vals <= cfg.max_plausible_m) & (
+            np.abs(vals - prev_v)
+            <= cfg.max_speed_mps * np.maximum(t_line - prev_t, cfg.interval_s)
+            + cfg.jump_noise_m))
+        bad = np.flatnonzero(~used)
         # bytes with nothing else in them: up to the first line that is not a reading
         clean_end = int(starts[bad[0]]) if len(bad) else len(rel.data)
         nt = int(np.searchsorted(ends, clean_end, side="right"))
@@ -126,7 +140,6 @@ class Ar4000SpanReader:
         over = np.flatnonzero(held > sp.max_line)
         if len(over):
             nt = min(nt, int(over[0]))
-        arrive = np.searchsorted(ends, nl + 1, side="left")  # tick index of each line
         got = np.full(len(tk), -np.inf)
         got[arrive[arrive < len(tk)]] = tk[arrive[arrive < len(tk)]]
         last_good = np.maximum(np.maximum.accumulate(got), d._last_good)
@@ -159,12 +172,7 @@ class Ar4000SpanReader:
         h = d.health
         base = h.snapshot()
         n = len(vals)
-        no_target = vals == NO_TARGET
-        implausible = ~no_target & ~((0.0 <= vals) & (vals <= d.config.max_plausible_m))
-        per_tick = {"messages": np.bincount(arrive, minlength=nt)[:nt],
-                    "no_target": np.bincount(arrive[no_target], minlength=nt)[:nt],
-                    "implausible": np.bincount(arrive[implausible], minlength=nt)[:nt]}
-        cum = {k: np.cumsum(v) for k, v in per_tick.items()}
+        cum = {"messages": np.cumsum(np.bincount(arrive, minlength=nt)[:nt])}
         last_t = np.full(nt, np.nan)
         last_t[arrive] = tk[arrive]
         idx = np.where(~np.isnan(last_t), np.arange(nt), -1)
@@ -173,16 +181,14 @@ class Ar4000SpanReader:
         if n:
             h.messages += n
             h.last_reading_t = float(tk[arrive[-1]])
-            h.extra["no_target"] += int(no_target.sum())
-            h.extra["implausible"] += int(implausible.sum())
             h.extra["silent"] = False
             h.extra["babbling"] = False
             d._recent.extend([True] * min(n, d._recent.maxlen or n))
             d._garbage_since_good = 0
             d._last_good = float(last_good[nt - 1])
+            d._prev = d._used = (float(vals[-1]), float(tk[arrive[-1]]))
         taken = int(nl[n - 1]) + 1 if n else 0
         d._splitter._buf = bytearray(raw[taken:int(ends[nt - 1])])
         self.port.advance(int(chunks[nt - 1]))
-        dist = np.where(no_target | implausible, np.nan, vals)
-        return LineSpan(k0, nt, k0 + arrive, {DISTANCE: dist},
+        return LineSpan(k0, nt, k0 + arrive, {DISTANCE: vals},
                         chunks[:nt] >= self.stream.chunk_count, base, cum)

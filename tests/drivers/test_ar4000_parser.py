@@ -82,3 +82,53 @@ def test_the_tail_of_an_overlong_line_is_not_a_distance() -> None:
     got = [parse_line(x, 0.001) for x in lines]
     assert got.count(None) == 3 and got[-2] == pytest.approx(1.2345)
     assert s.overflow_bytes == 40 + len(b"45\r\n") + len(b"7" * 50 + b"\n")
+
+
+def test_a_distance_is_used_only_if_the_handle_could_have_moved_there() -> None:
+    """The protocol has no checksum: a corrupted digit is stopped by the crowd's speed
+    (3 m/s, + 10 mm; 70 mm in one 20 ms sample), measured from the last distance used."""
+    drv = Ar4000Driver("laser", Ar4000Config(port="/dev/null", sample_interval_us=20000))
+    used: list[float | None] = []
+
+    def line(mm: int, t: float) -> None:
+        out: list = []
+        drv._parse(f"{mm}\r\n".encode(), out.append, t)
+        (r,) = out
+        used.append(r.values.get("distance_m"))
+
+    line(4910, 0.00)  # nothing to follow from yet
+    line(4912, 0.02)
+    line(4980, 0.04)  # 68 mm in 20 ms: 3.4 m/s, within the noise
+    line(5980, 0.06)  # a thousands digit corrupted
+    line(5980, 0.08)  # twice: the lines agree, but not with the last distance used
+    line(4990, 0.10)  # 10 mm from 4980 in 60 ms
+    line(5100, 0.12)  # 110 mm in 20 ms
+    assert used == [None, 4.912, 4.98, None, None, 4.99, None]
+    assert drv.health.extra["jumps"] == 3
+    line(0, 0.14)  # no target for a sample: the handle went on moving meanwhile
+    line(5030, 0.16)
+    line(5990, 0.18)
+    assert used[-2:] == [5.03, None] and drv.health.extra["jumps"] == 4
+    for i in range(6):  # no target for 6 samples: the last distance used is too old
+        line(0, 0.20 + 0.02 * i)
+    line(7000, 0.32)  # (nothing to follow from: no jump)
+    line(7010, 0.34)
+    line(7030, 0.36)
+    assert used[-3:] == [None, 7.01, 7.03] and drv.health.extra["jumps"] == 4
+    for i in range(5):  # something else in the beam for 5 samples (a hand)
+        line(2000, 0.38 + 0.02 * i)
+    assert used[-5:] == [None] * 5 and drv.health.extra["jumps"] == 9
+    line(2000, 0.48)  # the last distance used is 6 samples old: two lines that agree
+    line(2010, 0.50)  # start over (they would be the beam's target now)
+    assert used[-2:] == pytest.approx([2.0, 2.01], abs=1e-12) and drv.health.extra["jumps"] == 9
+    line(7080, 0.52)
+    assert used[-1] is None and drv.health.extra["jumps"] == 10
+
+
+def test_the_jump_keys_are_checked() -> None:
+    with pytest.raises(ValueError, match="'max_speed_mps' must be > 0"):
+        Ar4000Config.from_config({"port": "/dev/null", "max_speed_mps": 0})
+    with pytest.raises(ValueError, match="'jump_noise_m' must be >= 0"):
+        Ar4000Config.from_config({"port": "/dev/null", "jump_noise_m": -0.01})
+    with pytest.raises(ValueError, match="'max_speed_mps' must be a number"):
+        Ar4000Config.from_config({"port": "/dev/null", "max_speed_mps": "fast"})

@@ -1,7 +1,8 @@
 """The AR4000 driver's span reads do what its per-tick reads do, reading for reading and
 health after every tick: on the committed capture, and with what a laser and its line
 do wrong (garbage, empty and overlong lines, a line that never ends, no target,
-implausible and negative distances, a babbling stretch, a silence)."""
+implausible and negative distances, digits lost or gained, a babbling stretch, a
+silence)."""
 
 from __future__ import annotations
 
@@ -25,9 +26,13 @@ CAPTURE = Path(__file__).resolve().parents[2] / "hil_fixtures" / "captures" / "d
 PERIOD = 0.01
 BAD_LINES = {
     3: b"garbage\r\n", 5: b"\r\n", 7: b"1" * 40 + b"\r\n", 9: b"0.00\r\n", 11: b"25000\r\n",
-    13: b"-120\r\n", 15: b"12a4\r\n", 17: b"7" * 40, 19: b"0\r\n",
+    13: b"-120\r\n", 15: b"12a4\r\n", 17: b"7" * 40, 19: b"0\r\n", 23: b"1722\r\n",
+    27: b"7\r\n", 31: b"72\r\n", **{n: b"1500\r\n" for n in range(35, 43)},
 }
-"""Line index (in a damaged stretch) -> what the laser sent instead."""
+"""Line index (in a damaged stretch) -> what the laser sent instead: a digit gained or
+lost is a jump; eight lines of something else in the beam are taken once the last
+distance used is too old, and the handle's own distances after them are then jumps
+until it is too old in turn."""
 
 
 def _damage(stream: list[tuple[float, bytes]], t0: float, t1: float, babble: bool
@@ -102,6 +107,10 @@ def test_span_reads_match_per_tick_reads_on_a_damaged_line(window: int) -> None:
     b = _play(*_setup(edits, gap=(20.0, 21.5)), 3000, window)
     h = a[1][-1]
     assert h["bad_frames"] > 20 and h["no_target"] >= 4 and h["implausible"] >= 4
+    # per clean stretch 13: 1722, 7 and 72; five 1500s, then three taken; five of the
+    # handle's lines after them
+    assert h["jumps"] >= 2 * 13
+    assert sum(r[2] == 1.5 for r in a[0]) >= 2 * 3
     assert h["timeouts"] == 1 and h["reconnects"] == 1
     assert any(x["babbling"] for x in a[1])
     assert a == b

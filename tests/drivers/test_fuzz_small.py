@@ -154,3 +154,19 @@ def test_at_pitch_90_only_the_orientation_counts_not_its_angles() -> None:
     """There roll and yaw turn about one axis: other angles, the same orientation."""
     assert orientations_agree((20.0, 90.0, 50.0), euler_deg_to_quat(0.0, 90.0, 30.0))
     assert not orientations_agree((20.0, 90.0, 50.0), euler_deg_to_quat(0.0, 90.0, 29.98))
+
+
+def test_a_corrupted_laser_line_reaches_the_loop_only_within_the_handles_reach() -> None:
+    """The AR4000 has no checksum; a corrupted line's distance is used only within what
+    the handle moves in one 20 ms sample (3 m/s + 10 mm) of the last distance used, so
+    no reading is further off the clean line than that and the clean lines' own step."""
+    t = fuzz.Tally("ar4000", hang_s=1.0)
+    errors: list[float] = []
+    fuzz.fuzz_ar4000(3000, random.Random(11), t, errors)
+    lines = fuzz.rx_bytes("laser.serial.jsonl").split(b"\r\n")[1:-1]
+    step = max(abs(int(a) - int(b)) for a, b in zip(lines, lines[1:], strict=False)) * 1e-3
+    assert t.checked > 300 and errors  # corrupted distances there were, some got through
+    assert max(errors) <= 3.0 * 0.02 + 0.01 + step + 1e-9
+    off = []
+    fuzz.fuzz_ar4000(3000, random.Random(11), fuzz.Tally("ar4000", 1.0), off, 1e9)
+    assert max(off) > 1.0  # (without the rule, metres)
