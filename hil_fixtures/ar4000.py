@@ -4,7 +4,9 @@ It obeys the ASCII commands the driver uses (``A`` output mode, ``S`` sample
 interval in microseconds, ``F`` maximum range, ``P``/``M`` amplitude window),
 streams calibrated distances at the commanded interval, sends zero when there is
 no valid target, and can misbehave on demand: go silent (``silent = True``),
-babble (``babble`` = fraction of lines replaced by garbage), or look like a
+babble (``babble`` = fraction of lines replaced by garbage), measure something
+other than its target (``stray`` = fraction of samples from a return 0.5-3 m off:
+dust, a rope, the boom in the beam), or look like a
 device at another baud rate (it compares the speed the driver set on the tty
 with its own and, on a mismatch, ignores commands and sends only noise, as a UART
 receiving at the wrong rate would).
@@ -81,6 +83,8 @@ class Ar4000Emulator:
         """True: sends nothing and ignores commands (device off, cable cut)."""
         self.babble = 0.0
         """Fraction of output lines replaced by garbage."""
+        self.stray = 0.0
+        """Fraction of samples measured off something else in the beam, 0.5-3 m off."""
         self.commands: list[str] = []
         self.lines_sent = 0
         self.garbage_sent = 0
@@ -152,6 +156,8 @@ class Ar4000Emulator:
         amp = self.amplitude
         if isinstance(v, tuple):
             v, amp = v
+        if v is not None and self.stray and self._rng.random() < self.stray:
+            v = max(0.1, v + self._rng.choice((-1, 1)) * self._rng.uniform(0.5, 3.0))
         unit = _UNIT_M.get(self.output_mode, 0.0254)
         valid = (v is not None and math.isfinite(v) and v > 0
                  and self.min_amplitude <= amp <= self.max_amplitude)

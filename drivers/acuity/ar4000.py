@@ -297,8 +297,8 @@ class Ar4000Driver(Driver):
     Health: ``bad_frames`` counts malformed lines, ``rejected_bytes`` their bytes,
     ``timeouts`` silent periods; ``extra`` carries ``no_target`` (zero readings),
     ``implausible``, ``jumps`` (distances that cannot follow from the last one used),
-    ``silent`` and ``babbling`` (malformed fraction of the recent lines above
-    ``babble_ratio``).
+    ``silent``, ``babbling`` (malformed fraction of the recent lines above
+    ``babble_ratio``) and ``jumping`` (the same for jumps among the recent distances).
     """
 
     def __init__(self, name: str, config: Ar4000Config,
@@ -316,6 +316,9 @@ class Ar4000Driver(Driver):
         self._recent: deque[bool] = deque(maxlen=config.babble_window)
         self._recent_bad = 0
         """Malformed lines in ``_recent`` (kept as it changes, not summed per chunk)."""
+        self._recent_dist: deque[bool] = deque(maxlen=config.babble_window)
+        """Per recent distance line: whether it was a jump."""
+        self._recent_jumps = 0
         self._pending: list[Reading] = []
         self._last_good = 0.0
         self._garbage_since_good = 0
@@ -324,7 +327,7 @@ class Ar4000Driver(Driver):
         self._used: tuple[float, float] | None = None
         """The last distance used and its time."""
         self.health.extra.update({"no_target": 0, "implausible": 0, "jumps": 0,
-                                  "silent": False, "babbling": False})
+                                  "silent": False, "babbling": False, "jumping": False})
 
     @classmethod
     def from_config(cls, name: str, d: Mapping[str, Any], **kw: Any) -> Ar4000Driver:
@@ -411,10 +414,12 @@ class Ar4000Driver(Driver):
                     ref = prev if prev is not None and prev[0] != NO_TARGET else None
                 if ref is not None and follows(value, now, ref, cfg):
                     self._used = (value, now)
+                    self._remember_distance(False)
                     out(Reading(self.name, now, {DISTANCE: value}))
                 else:
                     if ref is not None:
                         self.health.extra["jumps"] += 1
+                        self._remember_distance(True)
                     out(Reading(self.name, now, {}, frozenset({DISTANCE})))
         self._update_babbling()
         return good
@@ -427,15 +432,36 @@ class Ar4000Driver(Driver):
         if not ok:
             self._recent_bad += 1
 
+    def _remember_distance(self, jump: bool) -> None:
+        recent = self._recent_dist
+        if len(recent) == recent.maxlen and recent[0]:
+            self._recent_jumps -= 1
+        recent.append(jump)
+        self._recent_jumps += jump
+
     def _update_babbling(self) -> None:
+        """``babbling`` (malformed lines) and ``jumping`` (distances the handle cannot
+        reach: a dirty target, something in the beam), each when its share of the recent
+        lines exceeds ``babble_ratio``."""
+        cfg = self.config
+        least = min(10, cfg.babble_window)
         n = len(self._recent)
         bad = self._recent_bad
-        babbling = n >= min(10, self.config.babble_window) and bad / n > self.config.babble_ratio
+        babbling = n >= least and bad / n > cfg.babble_ratio
         if babbling and not self.health.extra["babbling"]:
             log.warning("%s: AR4000 babbling: %d of the last %d lines malformed",
                         self.name, bad, n)
             self.health.last_error = f"babbling: {bad} of the last {n} lines malformed"
         self.health.extra["babbling"] = babbling
+        n, jumps = len(self._recent_dist), self._recent_jumps
+        jumping = n >= least and jumps / n > cfg.babble_ratio
+        if jumping and not self.health.extra["jumping"]:
+            log.warning("%s: AR4000 jumping: %d of the last %d distances further than the "
+                        "handle moves (dirty target, something in the beam?)", self.name,
+                        jumps, n)
+            self.health.last_error = (f"jumping: {jumps} of the last {n} distances further "
+                                      "than the handle moves")
+        self.health.extra["jumping"] = jumping
 
     def idle(self, now: float) -> bool:
         """True if :meth:`read` at ``now`` with nothing received would change nothing (no

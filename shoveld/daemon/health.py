@@ -95,6 +95,9 @@ def problems(drivers: Mapping[str, dict[str, Any]], loop: dict[str, Any],
             out.append(f"{name}: invalid {', '.join(d.get('invalid_signals', []))}")
         if d.get("babbling"):
             out.append(f"{name}: babbling (malformed data)")
+        if d.get("jumping"):
+            out.append(f"{name}: jumping (distances the handle cannot reach: dirty target, "
+                       "something in the beam?)")
         chans = d.get("channels")
         if isinstance(chans, dict):
             bad = [c for c, h in chans.items() if isinstance(h, dict)

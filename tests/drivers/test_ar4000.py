@@ -90,6 +90,23 @@ def test_babbling_counted_and_reported() -> None:
         assert run.wait_for(lambda: not h.extra["babbling"], 5)
 
 
+def test_something_else_in_the_beam_is_jumping_and_never_a_distance() -> None:
+    """Returns from dust, a rope or the boom: well-formed lines 0.5-3 m off the handle.
+    None is used, and health says the laser is jumping while they are a large share."""
+    with Ar4000Emulator(lambda t: 4.321) as emu, DriverRunner(driver_for(emu)) as run:
+        h = run.driver.health
+        assert run.wait_for(lambda: len(distances(run)) >= 5, 5)
+        emu.stray = 0.5
+        assert run.wait_for(lambda: h.extra["jumping"], 5)
+        assert "jumping" in (h.last_error or "")
+        assert h.extra["jumps"] >= 4  # more than 0.3 of at least 10 distances
+        assert h.bad_frames == 0  # every line was well-formed
+        n = len(distances(run))
+        emu.stray = 0.0
+        assert run.wait_for(lambda: not h.extra["jumping"] and len(distances(run)) > n + 20, 5)
+        assert all(d == pytest.approx(4.321, abs=0.0005) for d in distances(run))
+
+
 def test_only_garbage_is_treated_like_silence() -> None:
     with Ar4000Emulator(lambda t: 6.0) as emu, DriverRunner(driver_for(emu)) as run:
         h = run.driver.health

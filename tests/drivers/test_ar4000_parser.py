@@ -132,3 +132,19 @@ def test_the_jump_keys_are_checked() -> None:
         Ar4000Config.from_config({"port": "/dev/null", "jump_noise_m": -0.01})
     with pytest.raises(ValueError, match="'max_speed_mps' must be a number"):
         Ar4000Config.from_config({"port": "/dev/null", "max_speed_mps": "fast"})
+
+
+def test_a_laser_that_keeps_jumping_is_named_on_the_health_topic() -> None:
+    from shoveld.daemon.health import problems
+
+    drv = Ar4000Driver("laser", Ar4000Config(port="/dev/null", sample_interval_us=20000))
+    for i in range(31):  # after the handle, every other line 2 m nearer (14 of them)
+        mm = 2000 if i > 2 and i % 2 == 0 else 4000 + i
+        drv._parse(f"{mm}\r\n".encode(), lambda r: None, 0.02 * i)
+    assert drv.health.extra["jumping"] and drv.health.extra["jumps"] == 14
+    said = problems({"laser": {"state": "ok", **drv.health.extra}}, {}, {"open": True}, {})
+    assert said == ["laser: jumping (distances the handle cannot reach: dirty target, "
+                    "something in the beam?)"]
+    for i in range(31, 81):  # the beam clear again: the window forgets the jumps
+        drv._parse(f"{4000 + i}\r\n".encode(), lambda r: None, 0.02 * i)
+    assert not drv.health.extra["jumping"]
