@@ -1,0 +1,29 @@
+"""Stray laser returns (something else in the beam) in a replayed capture: the daemon's
+passes stay those of the clean capture, which they do not without the driver's rule."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
+import laser_strays  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def clean() -> dict[int, float]:
+    return dict(laser_strays.replay(laser_strays.CAPTURE)["passes"])
+
+
+@pytest.mark.parametrize("rule", [True, False], ids=["rule", "no-rule"])
+def test_two_percent_stray_lines(tmp_path: Path, clean: dict[int, float], rule: bool) -> None:
+    cap = laser_strays.stray_capture(tmp_path / "c", 0.02, 3, rule)
+    got = laser_strays.replay(cap)
+    assert len(clean) == 3 and sorted(dict(got["passes"])) == sorted(clean)
+    err = max(abs(kg - clean[no]) for no, kg in got["passes"])
+    if rule:  # each stray costs its ticks' updates, no more (0.1 % of a pass's payload)
+        assert got["jumps"] >= 50 and err < 0.001 * min(clean.values())
+    else:  # the bench's "before": the strays are taken for the crowd, tonnes off
+        assert got["jumps"] == 0 and err > 1000.0
