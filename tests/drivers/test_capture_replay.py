@@ -107,8 +107,9 @@ def test_replay_through_the_same_drivers(recorded: tuple[Path, dict[str, Any]],
     laser = got["laser"]
     dist = [r.values["distance_m"] for r in laser if r.values]
     # the replayed distances are the recorded ones, in order (the first few may be
-    # lost while the driver connects; the first after a no-target line has nothing to
-    # follow from and is not used)
+    # lost while the driver connects; the first after the no-target stretch, 0.1 s
+    # and so longer than the 5 samples a last distance used is followed from, has
+    # nothing to follow from and is not used)
     lines = [int(x) for x in rx.split(b"\r\n") if x.strip()]
     want = [v * 0.001 for i, v in enumerate(lines) if v != 0 and i and lines[i - 1] != 0]
     # paced replay streams on while a driver connects (as live): its start may be lost
