@@ -29,6 +29,8 @@ def test_no_crash_no_hang(parser: str) -> None:
     n = 3000
     if parser.startswith("xbus"):
         fuzz.fuzz_xbus(n, rng, t, "euler" if parser == "xbus-euler" else "euler+quaternion")
+    elif parser == "mti-can":
+        fuzz.fuzz_mti_can(n, rng, t)
     elif parser == "ar4000":
         fuzz.fuzz_ar4000(n, rng, t)
     elif parser == "modbus":
