@@ -10,6 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from drivers.acuity.ar4000 import Ar4000Config, Ar4000Driver, LineSplitter, parse_line
+from drivers.base import Reading
 
 WELL_FORMED = re.compile(rb"^ *-?\d{1,7}(\.\d{1,4})? *$")
 
@@ -91,7 +92,7 @@ def test_a_distance_is_used_only_if_the_handle_could_have_moved_there() -> None:
     used: list[float | None] = []
 
     def line(mm: int, t: float) -> None:
-        out: list = []
+        out: list[Reading] = []
         drv._parse(f"{mm}\r\n".encode(), out.append, t)
         (r,) = out
         used.append(r.values.get("distance_m"))

@@ -169,6 +169,6 @@ def test_a_corrupted_laser_line_reaches_the_loop_only_within_the_handles_reach()
     step = max(abs(int(a) - int(b)) for a, b in zip(lines, lines[1:], strict=False)) * 1e-3
     assert t.checked > 300 and errors  # corrupted distances there were, some got through
     assert max(errors) <= 3.0 * 0.02 + 0.01 + step + 1e-9
-    off = []
+    off: list[float] = []
     fuzz.fuzz_ar4000(3000, random.Random(11), fuzz.Tally("ar4000", 1.0), off, 1e9)
     assert max(off) > 1.0  # (without the rule, metres)

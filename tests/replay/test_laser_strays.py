@@ -22,6 +22,7 @@ def test_two_percent_stray_lines(tmp_path: Path, clean: dict[int, float], rule: 
     cap = laser_strays.stray_capture(tmp_path / "c", 0.02, 3, rule)
     got = laser_strays.replay(cap)
     assert len(clean) == 3 and sorted(dict(got["passes"])) == sorted(clean)
+    assert all(kg is not None for _, kg in got["passes"])  # every pass valid
     err = max(abs(kg - clean[no]) for no, kg in got["passes"])
     if rule:  # each stray costs its ticks' updates, no more (0.1 % of a pass's payload)
         assert got["jumps"] >= 50 and err < 0.001 * min(clean.values())
