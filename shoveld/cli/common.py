@@ -24,7 +24,25 @@ def read_tables(paths: list[str]) -> list[SignalsTable]:
             out.append(read_table(p))
         except SignalsFormatError as e:
             raise CliError(str(e)) from None
+        warn_crowd_jumps(out[-1])
     return out
+
+
+def warn_crowd_jumps(table: SignalsTable) -> None:
+    """One line on stderr if the table's crowd extension jumps further than a handle moves
+    (a laser return off something else: the daemon's driver drops those, a table from
+    another logger may hold them); the rows are used as they are."""
+    import sys
+
+    from shoveld.signals.checks import MAX_CROWD_SPEED_MPS, crowd_jumps
+    from shoveld.words import n_of
+
+    rows = crowd_jumps(table)
+    if len(rows):
+        print(f"shoveld: warning: {table.source}: crowd_m moves further than the handle can "
+              f"({MAX_CROWD_SPEED_MPS:g} m/s) at {n_of(len(rows), 'row', 'rows')}, the first "
+              f"at time_s {table.time[rows[0]]:g}: a laser return off something else in the "
+              "beam? They are used as they are", file=sys.stderr)
 
 
 def read_params(path: str) -> ModelParams:

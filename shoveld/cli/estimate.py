@@ -5,14 +5,10 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from typing import TYPE_CHECKING
 
 from shoveld.cli import CliError
 from shoveld.cli.common import read_params, read_tables
 from shoveld.words import n_of
-
-if TYPE_CHECKING:
-    from shoveld.signals import SignalsTable
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -35,20 +31,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def warn_crowd_jumps(table: SignalsTable) -> None:
-    """One line on stderr if the table's crowd extension jumps further than a handle moves
-    (a laser return off something else: the daemon's driver drops those, a table from
-    another logger may hold them); the rows are used as they are."""
-    from shoveld.signals.checks import MAX_CROWD_SPEED_MPS, crowd_jumps
-
-    rows = crowd_jumps(table)
-    if len(rows):
-        print(f"shoveld estimate: warning: {table.source}: crowd_m moves further than the "
-              f"handle can ({MAX_CROWD_SPEED_MPS:g} m/s) at {n_of(len(rows), 'row', 'rows')}, "
-              f"the first at time_s {table.time[rows[0]]:g}: a laser return off something "
-              "else in the beam? They are used as they are", file=sys.stderr)
-
-
 def run(args: argparse.Namespace) -> int:
     from shoveld.engine.loop import EngineConfig
     from shoveld.engine.offline import estimate_table
@@ -60,7 +42,6 @@ def run(args: argparse.Namespace) -> int:
     next_pass, next_truck = 1, 1
     trucks = []
     for table in tables:
-        warn_crowd_jumps(table)
         est = estimate_table(table, params, cfg, next_pass, next_truck,
                              keep_live=bool(args.plot))
         if args.plot:

@@ -88,6 +88,7 @@ def test_cli_round_trip(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> N
         assert abs(got["payload_kg"] - tp["payload_kg"]) < 500
     summary = json.loads(out.err.strip().splitlines()[-1])
     assert summary["trucks"] and summary["rule_10_10_20"]["trucks"] >= 1
+    assert "warning" not in out.err  # a simulated crowd never jumps (checks.crowd_jumps)
 
 
 def test_calibrate_takes_scale_verified_passes_with_the_trials(

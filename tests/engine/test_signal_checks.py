@@ -1,13 +1,13 @@
 """A signals table whose crowd extension jumps further than a handle moves is named by
-``shoveld estimate`` (the daemon's laser driver drops such lines; a table from another
-logger may hold them)."""
+every command that reads one (estimate, calibrate, diagnose): the daemon's laser driver
+drops such lines; a table from another logger may hold them."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from shoveld.cli.estimate import warn_crowd_jumps
+from shoveld.cli.common import warn_crowd_jumps
 from shoveld.signals.checks import crowd_jumps
 from shoveld.sim.scenario import SimResult
 
@@ -32,7 +32,7 @@ def test_a_stray_crowd_value_and_the_return_from_it_are_named(
     table.source = "other-logger.csv"
     warn_crowd_jumps(table)
     err = capsys.readouterr().err.splitlines()
-    assert err == ["shoveld estimate: warning: other-logger.csv: crowd_m moves further than "
+    assert err == ["shoveld: warning: other-logger.csv: crowd_m moves further than "
                    "the handle can (3 m/s) at 6 rows, the first at time_s "
                    f"{table.time[1000]:g}: a laser return off something else in the beam? "
                    "They are used as they are"]
