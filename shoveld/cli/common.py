@@ -6,6 +6,7 @@ imports every subcommand's module to list it) loads this file.
 
 from __future__ import annotations
 
+import sys
 from typing import TYPE_CHECKING
 
 from shoveld.cli import CliError
@@ -32,8 +33,6 @@ def warn_crowd_jumps(table: SignalsTable) -> None:
     """One line on stderr if the table's crowd extension jumps further than a handle moves
     (a laser return off something else: the daemon's driver drops those, a table from
     another logger may hold them); the rows are used as they are."""
-    import sys
-
     from shoveld.signals.checks import MAX_CROWD_SPEED_MPS, crowd_jumps
     from shoveld.words import n_of
 

@@ -23,6 +23,9 @@ def test_a_stray_crowd_value_and_the_return_from_it_are_named(
     for row, off in ((1000, 2.0), (2000, -0.6), (3000, 0.2)):
         crowd[row] += off
     crowd[2500] = np.nan  # a blank cell is skipped, not a jump
+    j = 2600 + int(np.argmax(np.abs(np.diff(clean["crowd_m"][2599:2900]))))
+    table.time[j] = table.time[j - 1]  # nor is a repeated time stamp while it moves
+    assert abs(crowd[j] - crowd[j - 1]) > 0.01
     # a value held for 10 rows (a slower logger) where the handle moves fastest, then the
     # handle where it is: what it moved in the meantime, not a jump
     k = 3500 + int(np.argmax(np.abs(np.diff(clean["crowd_m"][3500:]))))
