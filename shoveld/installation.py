@@ -12,6 +12,15 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+CROWD_SPEED_MAX_MPS = 3.0
+"""The fastest the handle moves along the laser's beam: above the 2 m/s the field trial
+tested the AR4000 at (the thesis, section 3.4) and the 2.1 m/s the simulated crowd
+reaches. A crowd extension further than this from the last one is not the handle (the
+laser driver's ``max_speed_mps``; the tables' check, ``shoveld.signals.checks``)."""
+LASER_STEP_NOISE_M = 0.01
+"""What two laser distances of a handle at rest may differ by (its 3 mm accuracy on
+each, its 1 mm step): the driver's ``jump_noise_m``."""
+
 
 @dataclass(frozen=True)
 class Installation:

@@ -53,6 +53,7 @@ from drivers.base import DeviceError, Driver, Reading, Sink, check_keys
 from drivers.capture.clock import clock_wait_until
 from drivers.capture.tap import ByteTap, SerialFactory, open_serial
 from drivers.serialio import direct_reader
+from shoveld.installation import CROWD_SPEED_MAX_MPS, LASER_STEP_NOISE_M
 
 log = logging.getLogger(__name__)
 
@@ -88,6 +89,36 @@ def follows(value: float, t: float, ref: tuple[float, float], cfg: Ar4000Config)
     time) in the time between them (at least one sample interval), plus the noise."""
     return abs(value - ref[0]) <= (cfg.max_speed_mps * max(t - ref[1], cfg.interval_s)
                                    + cfg.jump_noise_m)
+
+
+class RecentShare:
+    """Flags of the last ``size`` lines and how many are set, kept as each line comes
+    (not summed per chunk): the malformed lines for ``babbling``, the jumps among the
+    distances for ``jumping``."""
+
+    def __init__(self, size: int) -> None:
+        self._flags: deque[bool] = deque(maxlen=size)
+        self.count = 0
+
+    def __len__(self) -> int:
+        return len(self._flags)
+
+    def add(self, flag: bool) -> None:
+        flags = self._flags
+        if len(flags) == flags.maxlen and flags[0]:
+            self.count -= 1  # the oldest set flag drops out
+        flags.append(flag)
+        self.count += flag
+
+    def add_clear(self, n: int) -> None:
+        """``n`` lines with the flag clear (at most a window's worth changes anything)."""
+        for _ in range(min(n, self._flags.maxlen or n)):
+            self.add(False)
+
+    def over(self, ratio: float, least: int) -> bool:
+        """At least ``least`` lines, and more than ``ratio`` of them set."""
+        n = len(self._flags)
+        return n >= least and self.count / n > ratio
 
 
 class LineSplitter:
@@ -171,14 +202,13 @@ class Ar4000Config:
     """Fraction of malformed lines in the window above which ``babbling`` is reported."""
     max_plausible_m: float = 20.0
     """Distances outside [0, this] are reported invalid (AR4000 range is 16.5 m)."""
-    max_speed_mps: float = 3.0
+    max_speed_mps: float = CROWD_SPEED_MAX_MPS
     """The fastest the target on the handle moves along the beam. A distance further
     from the last one used than this speed covers (over the time between them, at least
     one sample interval) plus ``jump_noise_m`` is a jump, reported invalid: the protocol
     has no checksum, so a corrupted digit would otherwise be a distance."""
-    jump_noise_m: float = 0.01
-    """What two consecutive lines may differ by at rest (the laser's 3 mm accuracy on
-    each, its 1 mm step)."""
+    jump_noise_m: float = LASER_STEP_NOISE_M
+    """What two consecutive lines may differ by at rest."""
 
     @classmethod
     def from_config(cls, d: Mapping[str, Any]) -> Ar4000Config:
@@ -313,12 +343,10 @@ class Ar4000Driver(Driver):
         self._ser: Any = None
         self._direct: Callable[[float], bytes] | None = None
         self._splitter = LineSplitter(config.max_line_bytes)
-        self._recent: deque[bool] = deque(maxlen=config.babble_window)
-        self._recent_bad = 0
-        """Malformed lines in ``_recent`` (kept as it changes, not summed per chunk)."""
-        self._recent_dist: deque[bool] = deque(maxlen=config.babble_window)
-        """Per recent distance line: whether it was a jump."""
-        self._recent_jumps = 0
+        self._malformed = RecentShare(config.babble_window)
+        """Of the recent lines, the malformed ones."""
+        self._jumped = RecentShare(config.babble_window)
+        """Of the recent distance lines, the jumps."""
         self._pending: list[Reading] = []
         self._last_good = 0.0
         self._garbage_since_good = 0
@@ -396,10 +424,10 @@ class Ar4000Driver(Driver):
                     self.health.bad_frames += 1
                     self.health.rejected_bytes += len(line) + 1
                     self._garbage_since_good += len(line) + 1
-                    self._remember(False)
+                    self._malformed.add(True)
                 continue
             good += 1
-            self._remember(True)
+            self._malformed.add(False)
             self._garbage_since_good = 0
             prev, self._prev = self._prev, (value, now)
             if value == NO_TARGET:
@@ -414,30 +442,15 @@ class Ar4000Driver(Driver):
                     ref = prev if prev is not None and prev[0] != NO_TARGET else None
                 if ref is not None and follows(value, now, ref, cfg):
                     self._used = (value, now)
-                    self._remember_distance(False)
+                    self._jumped.add(False)
                     out(Reading(self.name, now, {DISTANCE: value}))
                 else:
                     if ref is not None:
                         self.health.extra["jumps"] += 1
-                        self._remember_distance(True)
+                        self._jumped.add(True)
                     out(Reading(self.name, now, {}, frozenset({DISTANCE})))
         self._update_babbling()
         return good
-
-    def _remember(self, ok: bool) -> None:
-        recent = self._recent
-        if len(recent) == recent.maxlen and not recent[0]:
-            self._recent_bad -= 1  # the oldest (malformed) line drops out
-        recent.append(ok)
-        if not ok:
-            self._recent_bad += 1
-
-    def _remember_distance(self, jump: bool) -> None:
-        recent = self._recent_dist
-        if len(recent) == recent.maxlen and recent[0]:
-            self._recent_jumps -= 1
-        recent.append(jump)
-        self._recent_jumps += jump
 
     def _update_babbling(self) -> None:
         """``babbling`` (malformed lines) and ``jumping`` (distances the handle cannot
@@ -445,16 +458,15 @@ class Ar4000Driver(Driver):
         lines exceeds ``babble_ratio``."""
         cfg = self.config
         least = min(10, cfg.babble_window)
-        n = len(self._recent)
-        bad = self._recent_bad
-        babbling = n >= least and bad / n > cfg.babble_ratio
+        n, bad = len(self._malformed), self._malformed.count
+        babbling = self._malformed.over(cfg.babble_ratio, least)
         if babbling and not self.health.extra["babbling"]:
             log.warning("%s: AR4000 babbling: %d of the last %d lines malformed",
                         self.name, bad, n)
             self.health.last_error = f"babbling: {bad} of the last {n} lines malformed"
         self.health.extra["babbling"] = babbling
-        n, jumps = len(self._recent_dist), self._recent_jumps
-        jumping = n >= least and jumps / n > cfg.babble_ratio
+        n, jumps = len(self._jumped), self._jumped.count
+        jumping = self._jumped.over(cfg.babble_ratio, least)
         if jumping and not self.health.extra["jumping"]:
             log.warning("%s: AR4000 jumping: %d of the last %d distances further than the "
                         "handle moves (dirty target, something in the beam?)", self.name,

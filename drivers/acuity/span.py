@@ -92,9 +92,9 @@ class Ar4000SpanReader:
         d = self.driver
         sp = d._splitter
         return (d.health.connected and d._ser is self.port and not self.port.in_waiting
-                and not d._pending and d._recent_bad == 0 and not sp._skipping
+                and not d._pending and d._malformed.count == 0 and not sp._skipping
                 and not d.health.extra["babbling"] and len(sp._buf) <= sp.max_line
-                and d._used is not None and d._used == d._prev and d._recent_jumps == 0
+                and d._used is not None and d._used == d._prev and d._jumped.count == 0
                 and not d.health.extra["jumping"])
 
     def read(self, k0: int, k1: int) -> LineSpan | None:
@@ -184,8 +184,8 @@ class Ar4000SpanReader:
             h.last_reading_t = float(tk[arrive[-1]])
             h.extra["silent"] = False
             h.extra["babbling"] = False
-            d._recent.extend([True] * min(n, d._recent.maxlen or n))
-            d._recent_dist.extend([False] * min(n, d._recent_dist.maxlen or n))
+            d._malformed.add_clear(n)
+            d._jumped.add_clear(n)
             d._garbage_since_good = 0
             d._last_good = float(last_good[nt - 1])
             d._prev = d._used = (float(vals[-1]), float(tk[arrive[-1]]))

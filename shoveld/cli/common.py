@@ -33,13 +33,14 @@ def warn_crowd_jumps(table: SignalsTable) -> None:
     """One line on stderr if the table's crowd extension jumps further than a handle moves
     (a laser return off something else: the daemon's driver drops those, a table from
     another logger may hold them); the rows are used as they are."""
-    from shoveld.signals.checks import MAX_CROWD_SPEED_MPS, crowd_jumps
+    from shoveld.installation import CROWD_SPEED_MAX_MPS
+    from shoveld.signals.checks import crowd_jumps
     from shoveld.words import n_of
 
     rows = crowd_jumps(table)
     if len(rows):
         print(f"shoveld: warning: {table.source}: crowd_m moves further than the handle can "
-              f"({MAX_CROWD_SPEED_MPS:g} m/s) at {n_of(len(rows), 'row', 'rows')}, the first "
+              f"({CROWD_SPEED_MAX_MPS:g} m/s) at {n_of(len(rows), 'row', 'rows')}, the first "
               f"at time_s {table.time[rows[0]]:g}: a laser return off something else in the "
               "beam? They are used as they are", file=sys.stderr)
 

@@ -10,17 +10,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from shoveld.installation import CROWD_SPEED_MAX_MPS, LASER_STEP_NOISE_M
 from shoveld.signals.table import SignalsTable
 
-MAX_CROWD_SPEED_MPS = 3.0
-"""The AR4000 driver's ``max_speed_mps`` default: above the 2 m/s the field trial tested
-the laser at and the 2.1 m/s the simulated crowd reaches."""
-CROWD_NOISE_M = 0.01
-"""The driver's ``jump_noise_m`` default."""
 
-
-def crowd_jumps(table: SignalsTable, max_speed_mps: float = MAX_CROWD_SPEED_MPS,
-                noise_m: float = CROWD_NOISE_M) -> np.ndarray:
+def crowd_jumps(table: SignalsTable, max_speed_mps: float = CROWD_SPEED_MAX_MPS,
+                noise_m: float = LASER_STEP_NOISE_M) -> np.ndarray:
     """Row indices where ``crowd_m`` changes by more than the handle moves since its
     last change (a table may hold each laser sample over several rows; at least one row's
     interval, so a repeated time stamp is no jump), plus the noise. Blank (NaN) cells are
