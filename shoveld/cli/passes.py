@@ -21,13 +21,21 @@ from shoveld.words import n_of
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from shoveld.paths import CONFIG_SEARCH
-
     p = sub.add_parser(
         "passes", help="export the pass log (shift report)",
         description="Lists the passes the daemon committed to its pass log, with trucks and "
                     "the 10/10/20 summary of the trucks closed in the period; --csv for a "
                     "spreadsheet.")
+    add_log_window(p)
+    p.add_argument("--csv", action="store_true", help="CSV on stdout")
+    p.set_defaults(func=run)
+
+
+def add_log_window(p: argparse.ArgumentParser) -> None:
+    """Where the pass log is and which of its passes to read: the options ``passes`` and
+    ``report`` share, so that both read the same log the same way (:func:`read_window`)."""
+    from shoveld.paths import CONFIG_SEARCH
+
     src = p.add_mutually_exclusive_group()
     src.add_argument("--config", default=None,
                      help=f"daemon config whose shovel.state_dir to read (default: "
@@ -36,10 +44,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     src.add_argument("--db", default=None, help="the pass log file itself")
     p.add_argument("--since", default=None, metavar="WHEN",
                    help="passes that ended at or after WHEN: an ISO date or time, Unix "
-                        "seconds, 12h / 30m / 2d back from now, today or yesterday")
+                        "seconds, 12h / 30m / 2d back from now, today or yesterday "
+                        "(default: the whole log)")
     p.add_argument("--until", default=None, metavar="WHEN", help="... and before WHEN")
-    p.add_argument("--csv", action="store_true", help="CSV on stdout")
-    p.set_defaults(func=run)
 
 
 def parse_when(text: str, now: float | None = None) -> float:

@@ -10,7 +10,7 @@ from shoveld.words import n_of
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from shoveld.paths import CONFIG_SEARCH
+    from shoveld.cli.passes import add_log_window
 
     p = sub.add_parser(
         "report", help="shift report: HTML page with plots, and CSV, from the pass log",
@@ -18,16 +18,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "the tables as CSV: tonnes per hour, trucks against target and the "
                     "10/10/20 rule, pass payloads and truck fill, cycle times, passes not "
                     "weighed and why.")
-    src = p.add_mutually_exclusive_group()
-    src.add_argument("--config", default=None,
-                     help=f"daemon config whose shovel.state_dir to read (default: "
-                          f"{CONFIG_SEARCH})")
-    src.add_argument("--state-dir", default=None, help="the daemon's state directory")
-    src.add_argument("--db", default=None, help="the pass log file itself")
-    p.add_argument("--since", default=None, metavar="WHEN",
-                   help="passes that ended at or after WHEN: an ISO date or time, 12h / 2d "
-                        "back from now, today or yesterday (default: the whole log)")
-    p.add_argument("--until", default=None, metavar="WHEN", help="... and before WHEN")
+    add_log_window(p)
     p.add_argument("--out", required=True, metavar="DIR", help="folder to write (created)")
     p.add_argument("--title", default="Shift report")
     p.set_defaults(func=run)
