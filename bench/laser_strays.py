@@ -13,7 +13,14 @@ the loop, the estimator), with the driver's rule (the default) and without it
 the clean capture's: the pass error in kilograms, and the passes lost (the capture
 has three).
 
+``--blocks`` puts something in the beam that stays: in each pass, once, for a given
+time (a rope swinging through, a dust cloud that hangs), every line is a return 0.5-3
+m off the target (the same offset for the whole block, +-2 mm), placed at random
+its middle in the pass's lift and swing (the pass's last ``samples`` ticks before the
+dump), where the payload is estimated.
+
     .venv/bin/python bench/laser_strays.py [--rates 0.005,0.02,0.05] [--seeds 10]
+    .venv/bin/python bench/laser_strays.py --blocks 0.1,0.3,1,3 [--seeds 10]
 """
 
 from __future__ import annotations
@@ -32,11 +39,21 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 CAPTURE = ROOT / "hil_fixtures" / "captures" / "daemon-e2e"
 PARAMS = CAPTURE / "params.toml"
+TICK_S = 0.01
+"""The loop's tick (100 Hz): a pass's lift and swing are about its last ``samples``
+ticks before the dump."""
 
 
-def stray_capture(dst: Path, rate: float, seed: int, rule: bool) -> Path:
-    """A copy of the capture with stray returns in the laser's lines (and the rule off
-    in its laser config if not ``rule``)."""
+Blocks = list[tuple[float, float, int]]
+"""Something in the beam: (from, to) in capture seconds, and its offset from the target
+in mm."""
+
+
+def stray_capture(dst: Path, rate: float, seed: int, rule: bool,
+                  blocks: Blocks | None = None, laser: dict[str, Any] | None = None) -> Path:
+    """A copy of the capture with stray returns in the laser's lines, and lines inside
+    ``blocks`` off by the block's offset (and the rule off in its laser config if not
+    ``rule``)."""
     shutil.copytree(CAPTURE, dst)
     rng = random.Random(seed)
     src = (CAPTURE / "laser.serial.jsonl").read_text().splitlines()
@@ -52,7 +69,12 @@ def stray_capture(dst: Path, rate: float, seed: int, rule: bool) -> Path:
             continue
         whole = b"".join(bytes.fromhex(r["hex"]) for r in line)
         digits = whole.strip()
-        if rate and digits.isdigit() and int(digits) and rng.random() < rate:
+        t = line[0]["t"]
+        block = next((off for a, b, off in blocks or () if a <= t < b), None)
+        if digits.isdigit() and int(digits) and block is not None:
+            new = f"{max(100, int(digits) + block + rng.randint(-2, 2))}\r\n".encode()
+            line = [{**line[0], "hex": new.hex()}]
+        elif rate and digits.isdigit() and int(digits) and rng.random() < rate:
             mm = int(digits) + rng.choice((-1, 1)) * rng.randint(500, 3000)
             new = f"{max(100, mm)}\r\n".encode()
             line = [{**line[0], "hex": new.hex()}]  # the whole line at its first byte's time
@@ -60,6 +82,10 @@ def stray_capture(dst: Path, rate: float, seed: int, rule: bool) -> Path:
         line = []
     out.extend(json.dumps(r, separators=(",", ":")) for r in line)
     (dst / "laser.serial.jsonl").write_text("\n".join(out) + "\n")
+    if laser:
+        man = json.loads((dst / "manifest.json").read_text())
+        man["devices"]["laser"]["config"].update(laser)
+        (dst / "manifest.json").write_text(json.dumps(man, indent=2))
     if not rule:
         man = json.loads((dst / "manifest.json").read_text())
         man["devices"]["laser"]["config"]["max_speed_mps"] = 1e9
@@ -89,15 +115,81 @@ def replay(capture: Path) -> dict[str, Any]:
             rr.close()
     return {"passes": [(m["pass"], m["payload_kg"] if m.get("valid") else None)
                        for m in passes],
+            "spans": [(m["pass"], m["end"] - m["samples"] * TICK_S, m["end"])
+                      for m in passes],
             "jumps": laser.get("jumps", 0)}
+
+
+def pass_blocks(spans: list[tuple[int, float, float]], start_unix: float, duration: float,
+                rng: random.Random) -> Blocks:
+    """One block of ``duration`` s in each pass, its middle at a random time of the
+    pass's lift and swing (where the payload is estimated; ``spans``)."""
+    out: Blocks = []
+    for _no, a, b in spans:
+        a, b = a - start_unix, b - start_unix
+        t0 = rng.uniform(a, b) - duration / 2
+        out.append((t0, t0 + duration, rng.choice((-1, 1)) * rng.randint(500, 3000)))
+    return out
+
+
+def summary(errs: list[float]) -> tuple[float, float, float]:
+    """Median, p90 and largest of the errors (nan where there are none)."""
+    errs = sorted(errs)
+    if not errs:
+        return float("nan"), float("nan"), float("nan")
+    return statistics.median(errs), errs[int(0.9 * (len(errs) - 1))], errs[-1]
+
+
+def run_blocks(durations: list[float], seeds: int, tmp: Path,
+               laser: dict[str, Any] | None = None) -> None:
+    """Something that stays in the beam, once a pass, for each of ``durations``."""
+    base = replay(CAPTURE)
+    clean = dict(base["passes"])
+    start_unix = json.loads((CAPTURE / "manifest.json").read_text())["start_unix"]
+    print(f"clean capture: passes {[round(v, 1) for v in clean.values()]} kg; "
+          "one block a pass")
+    print(f"{'block':>6s} {'rule':>4s} {'passes':>7s} {'lost':>5s} {'|err| median':>13s} "
+          f"{'p90':>8s} {'max':>8s} {'jumps/run':>10s}")
+    for dur in durations:
+        for rule in (True, False):
+            errs: list[float] = []
+            lost = jumps = 0
+            for seed in range(1, seeds + 1):
+                blocks = pass_blocks(base["spans"], start_unix, dur, random.Random(seed))
+                cap = stray_capture(tmp / f"b{dur}-{rule}-{seed}", 0.0, seed, rule, blocks,
+                                    laser)
+                got = replay(cap)
+                jumps += got["jumps"]
+                have = dict(got["passes"])
+                for no, kg in clean.items():
+                    if have.get(no) is not None:
+                        errs.append(abs(have[no] - kg))
+                    else:
+                        lost += 1
+                shutil.rmtree(cap)
+            med, p90, top = summary(errs)
+            print(f"{dur:5.2f}s {'on' if rule else 'off':>4s} {len(errs):7d} {lost:5d} "
+                  f"{med:10.1f} kg {p90:5.0f} kg {top:5.0f} kg {jumps / seeds:10.1f}",
+                  flush=True)
 
 
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--rates", default="0.005,0.02,0.05")
     ap.add_argument("--seeds", type=int, default=10)
+    ap.add_argument("--blocks", default="", metavar="S,S,...",
+                    help="something that stays in the beam: one block a pass of each of "
+                         "these durations (seconds), instead of stray lines")
+    ap.add_argument("--other-target-s", type=float, default=None,
+                    help="the laser driver's other_target_s for --blocks (default: its own)")
     args = ap.parse_args()
     logging.disable(logging.WARNING)
+    if args.blocks:
+        with tempfile.TemporaryDirectory() as tmp:
+            run_blocks([float(x) for x in args.blocks.split(",")], args.seeds, Path(tmp),
+                       {"other_target_s": args.other_target_s} if args.other_target_s
+                       else None)
+        return
     with tempfile.TemporaryDirectory() as tmp:
         clean = dict(replay(CAPTURE)["passes"])
         print(f"clean capture: passes {[round(v, 1) for v in clean.values()]} kg")

@@ -66,7 +66,10 @@ _LINE_RE = re.compile(rb"^ *(-?)(\d{1,7})(?:\.(\d{1,4}))? *$")
 
 NO_TARGET = 0.0
 REFERENCE_LINES = 5
-"""Sample intervals for which the last distance used stays the reference for the next."""
+"""Sample intervals for which the last distance used alone says where the next may be
+(after them a distance must also follow the line before it), and lines out of the
+handle's reach, following each other, that make something else in the beam (fewer are
+strays)."""
 
 
 def parse_line(line: bytes, unit_m: float) -> float | None:
@@ -209,6 +212,16 @@ class Ar4000Config:
     has no checksum, so a corrupted digit would otherwise be a distance."""
     jump_noise_m: float = LASER_STEP_NOISE_M
     """What two consecutive lines may differ by at rest."""
+    other_target_s: float = 5.0
+    """How long something else in the beam (lines that follow each other, the first of
+    them a jump) stays refused before it is taken as the target. It cannot be the handle
+    while the last distance used is right; only if that one was wrong (something in the
+    beam at a connection, a crowd faster than ``max_speed_mps``) is it, and only time
+    can tell. Refused, it costs the loop the crowd for as long (its ticks are not used:
+    a pass has fewer samples); taken, it is a crowd metres off (a pass tonnes off: 2 s
+    here let a 3 s block of dust move passes by 1 t, median; 5 s, by 27 kg,
+    ``bench/laser_strays.py --blocks``). So the longer of the two: about a pass's lift
+    and swing."""
 
     @classmethod
     def from_config(cls, d: Mapping[str, Any]) -> Ar4000Config:
@@ -261,7 +274,7 @@ class Ar4000Config:
             raise bad("max_line_bytes", "must be in 8..1024")
         if self.babble_window < 1 or not 0 < self.babble_ratio <= 1:
             raise bad("babble_ratio", "must be in (0, 1] with babble_window >= 1")
-        for key in ("max_plausible_m", "max_speed_mps"):
+        for key in ("max_plausible_m", "max_speed_mps", "other_target_s"):
             if not getattr(self, key) > 0:
                 raise bad(key, "must be > 0")
         if not self.jump_noise_m >= 0:
@@ -318,16 +331,20 @@ class Ar4000Driver(Driver):
     The protocol has no checksum; what stops a corrupted digit is the handle's speed. A
     distance is used only if it can follow from the last distance used, no further from
     it than the handle moves in the time between them (``max_speed_mps``, plus
-    ``jump_noise_m``), no-target lines in between or not. After a connection, or
-    :data:`REFERENCE_LINES` sample intervals with none used, there is no such distance:
-    a distance must then follow in the same way from the well-formed line just before
-    it (so the first after a start or a long no-target stretch is reported invalid, and
-    two lines that agree start over wherever the target went).
+    ``jump_noise_m``), no-target lines in between or not. After a connection there is
+    no such distance, and after :data:`REFERENCE_LINES` sample intervals with none used
+    the one there is allows much: a distance must then also follow in the same way from
+    the well-formed line just before it (so the first after a start or a long no-target
+    stretch is reported invalid). Something else that stays in the beam (lines that
+    follow each other, the first a jump) stays a jump when the handle's reach grows to
+    it, until it has held for ``other_target_s`` (then it is taken as the target,
+    counted in ``extra["other_target"]``).
 
     Health: ``bad_frames`` counts malformed lines, ``rejected_bytes`` their bytes,
     ``timeouts`` silent periods; ``extra`` carries ``no_target`` (zero readings),
     ``implausible``, ``jumps`` (distances that cannot follow from the last one used),
-    ``silent``, ``babbling`` (malformed fraction of the recent lines above
+    ``other_target`` (something else in the beam taken as the target), ``silent``,
+    ``babbling`` (malformed fraction of the recent lines above
     ``babble_ratio``) and ``jumping`` (the same for jumps among the recent distances).
     """
 
@@ -354,7 +371,11 @@ class Ar4000Driver(Driver):
         """The last well-formed line's value (metres, 0 for no target) and time."""
         self._used: tuple[float, float] | None = None
         """The last distance used and its time."""
+        self._other: tuple[float, float, float, int] | None = None
+        """Something else in the beam: since when, its last distance, that one's time and
+        how many lines (the jumps since the last distance used that follow each other)."""
         self.health.extra.update({"no_target": 0, "implausible": 0, "jumps": 0,
+                                  "other_target": 0,
                                   "silent": False, "babbling": False, "jumping": False})
 
     @classmethod
@@ -374,7 +395,7 @@ class Ar4000Driver(Driver):
             raise DeviceError(f"cannot open AR4000 port {cfg.port}: {e}") from e
         self._splitter.clear()
         self._pending.clear()
-        self._prev = self._used = None  # a new connection: nothing to follow from
+        self._prev = self._used = self._other = None  # a new connection: nothing to follow
         if cfg.configure:
             for cmd in cfg.commands():
                 self._ser.write(cmd)
@@ -436,21 +457,52 @@ class Ar4000Driver(Driver):
             elif not 0.0 <= value <= cfg.max_plausible_m:
                 self.health.extra["implausible"] += 1
                 out(Reading(self.name, now, {}, frozenset({DISTANCE})))
+            elif self._takes(value, now, prev):
+                self._used, self._other = (value, now), None
+                self._jumped.add(False)
+                out(Reading(self.name, now, {DISTANCE: value}))
             else:
-                ref = self._used
-                if ref is None or now - ref[1] > cfg.interval_s * (REFERENCE_LINES + 0.5):
-                    ref = prev if prev is not None and prev[0] != NO_TARGET else None
-                if ref is not None and follows(value, now, ref, cfg):
-                    self._used = (value, now)
-                    self._jumped.add(False)
-                    out(Reading(self.name, now, {DISTANCE: value}))
-                else:
-                    if ref is not None:
-                        self.health.extra["jumps"] += 1
-                        self._jumped.add(True)
-                    out(Reading(self.name, now, {}, frozenset({DISTANCE})))
+                out(Reading(self.name, now, {}, frozenset({DISTANCE})))
         self._update_babbling()
         return good
+
+    def _takes(self, value: float, now: float, prev: tuple[float, float] | None) -> bool:
+        """Whether a distance is the handle's (see the class's docstring). A refused one
+        is counted as a jump, unless nothing could be measured against it (no distance
+        used since a connection or for a while, and no distance on the line before)."""
+        cfg = self.config
+        used, other = self._used, self._other
+        line = prev if prev is not None and prev[0] != NO_TARGET else None
+        recent = cfg.interval_s * (REFERENCE_LINES + 0.5)
+        same = (other is not None and now - other[2] <= recent
+                and follows(value, now, other[1:3], cfg))
+        if not same:
+            other = None
+        if other is not None and now - other[0] >= cfg.other_target_s:
+            assert used is not None
+            self.health.extra["other_target"] += 1
+            log.warning("%s: AR4000 takes as its target what held %.1f s in the beam, "
+                        "%+.3f m from the last distance used", self.name, now - other[0],
+                        value - used[0])
+            return True
+        # a line or two out of reach are strays; from REFERENCE_LINES on, an object that
+        # keeps its place out of reach even when the reach grows to it
+        held = other is not None and other[3] >= REFERENCE_LINES
+        if not held and (used is None or follows(value, now, used, cfg)):
+            # within the handle's reach: and, with no recent distance used to say so,
+            # confirmed by the line before it
+            if used is not None and now - used[1] <= recent:
+                return True
+            if line is None:
+                return False
+            if follows(value, now, line, cfg):
+                return True
+        else:  # out of the handle's reach, or what was: something else in the beam
+            self._other = ((now, value, now, 1) if other is None
+                           else (other[0], value, now, other[3] + 1))
+        self.health.extra["jumps"] += 1
+        self._jumped.add(True)
+        return False
 
     def _update_babbling(self) -> None:
         """``babbling`` (malformed lines) and ``jumping`` (distances the handle cannot

@@ -87,8 +87,10 @@ def test_the_tail_of_an_overlong_line_is_not_a_distance() -> None:
 
 def test_a_distance_is_used_only_if_the_handle_could_have_moved_there() -> None:
     """The protocol has no checksum: a corrupted digit is stopped by the crowd's speed
-    (3 m/s, + 10 mm; 70 mm in one 20 ms sample), measured from the last distance used."""
-    drv = Ar4000Driver("laser", Ar4000Config(port="/dev/null", sample_interval_us=20000))
+    (3 m/s, + 10 mm; 70 mm in one 20 ms sample), measured from the last distance used;
+    something else in the beam stays refused for ``other_target_s`` (here 2 s)."""
+    drv = Ar4000Driver("laser", Ar4000Config(port="/dev/null", sample_interval_us=20000,
+                                             other_target_s=2.0))
     used: list[float | None] = []
 
     def line(mm: int, t: float) -> None:
@@ -110,20 +112,31 @@ def test_a_distance_is_used_only_if_the_handle_could_have_moved_there() -> None:
     line(5030, 0.16)
     line(5990, 0.18)
     assert used[-2:] == [5.03, None] and drv.health.extra["jumps"] == 4
-    for i in range(6):  # no target for 6 samples: the last distance used is too old
+    for i in range(6):  # no target for 6 samples (0.12 s): the handle moves 0.5 m at most
         line(0, 0.20 + 0.02 * i)
-    line(7000, 0.32)  # (nothing to follow from: no jump)
-    line(7010, 0.34)
-    line(7030, 0.36)
-    assert used[-3:] == [None, 7.01, 7.03] and drv.health.extra["jumps"] == 4
-    for i in range(5):  # something else in the beam for 5 samples (a hand)
-        line(2000, 0.38 + 0.02 * i)
-    assert used[-5:] == [None] * 5 and drv.health.extra["jumps"] == 9
-    line(2000, 0.48)  # the last distance used is 6 samples old: two lines that agree
-    line(2010, 0.50)  # start over (they would be the beam's target now)
-    assert used[-2:] == pytest.approx([2.0, 2.01], abs=1e-12) and drv.health.extra["jumps"] == 9
-    line(7080, 0.52)
-    assert used[-1] is None and drv.health.extra["jumps"] == 10
+    line(7000, 0.32)  # 2 m away: something else in the beam, refused
+    line(7010, 0.34)  # and so is what follows it, though the handle's reach grows
+    assert used[-2:] == [None, None] and drv.health.extra["jumps"] == 6
+    for i in range(50):  # no target for a second: the handle may be anywhere by 3 m
+        line(0, 0.36 + 0.02 * i)
+    line(7000, 1.36)  # within reach, but the last distance used is old: confirmed by the
+    line(7010, 1.38)  # next line (nothing to follow from: no jump)
+    line(7030, 1.40)
+    assert used[-3:] == [None, 7.01, 7.03] and drv.health.extra["jumps"] == 6
+    assert drv.health.extra["other_target"] == 0
+    for i in range(60):  # something else in the beam for 1.2 s (a rope, dust)
+        line(2000 + i % 3, 1.42 + 0.02 * i)
+    assert used[-60:] == [None] * 60 and drv.health.extra["jumps"] == 66
+    line(7080, 2.62)  # the handle again, 1.2 s after the last distance used: within
+    line(7085, 2.64)  # reach, confirmed by the next line
+    assert used[-2:] == [None, 7.085] and drv.health.extra["jumps"] == 67
+    assert drv.health.extra["other_target"] == 0
+    for i in range(101):  # something else that stays: taken as the target after 2 s
+        line(2000 + i % 3, 2.66 + 0.02 * i)
+    assert used[-101:-1] == [None] * 100 and used[-1] == pytest.approx(2.001, abs=1e-12)
+    assert drv.health.extra["other_target"] == 1 and drv.health.extra["jumps"] == 167
+    line(7080, 4.68)  # ... and the handle is then what is out of reach, for a while
+    assert used[-1] is None and drv.health.extra["jumps"] == 168
 
 
 def test_the_jump_keys_are_checked() -> None:
