@@ -107,6 +107,32 @@ def test_something_else_in_the_beam_is_jumping_and_never_a_distance() -> None:
         assert all(d == pytest.approx(4.321, abs=0.0005) for d in distances(run))
 
 
+@pytest.mark.parametrize("other_target_s", [5.0, 0.3])
+def test_something_that_stays_in_the_beam_is_refused_for_other_target_s(
+        other_target_s: float) -> None:
+    """Something in the beam 2.3 m in front of the handle for about a second: never a
+    distance while it stays refused (5 s, the default); taken as the target once it has
+    held for ``other_target_s`` when that is shorter, and then counted."""
+    where = [4.321]
+    with Ar4000Emulator(lambda t: where[0]) as emu, DriverRunner(
+            driver_for(emu, other_target_s=other_target_s)) as run:
+        h = run.driver.health
+        assert run.wait_for(lambda: len(distances(run)) >= 5, 5)
+        n = len(run.readings)
+        where[0] = 2.0
+        assert run.wait_for(lambda: len(run.readings) >= n + 100, 5)  # 100 lines: 1 s
+        where[0] = 4.321
+        assert run.wait_for(lambda: distances(run)[-1] == pytest.approx(4.321, abs=5e-4), 15)
+        assert h.extra["jumping"] or h.extra["jumps"] >= 45
+        assert h.bad_frames == 0
+        if other_target_s > 1.0:
+            assert h.extra["other_target"] == 0
+            assert all(d == pytest.approx(4.321, abs=5e-4) for d in distances(run))
+        else:  # taken after 0.3 s: then the handle is what is refused, for as long
+            assert h.extra["other_target"] == 2
+            assert any(d == pytest.approx(2.0, abs=5e-4) for d in distances(run))
+
+
 def test_only_garbage_is_treated_like_silence() -> None:
     with Ar4000Emulator(lambda t: 6.0) as emu, DriverRunner(driver_for(emu)) as run:
         h = run.driver.health
