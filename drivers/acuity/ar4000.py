@@ -214,14 +214,14 @@ class Ar4000Config:
     """What two consecutive lines may differ by at rest."""
     other_target_s: float = 5.0
     """How long something else in the beam (lines that follow each other, the first of
-    them a jump) stays refused before it is taken as the target. It cannot be the handle
-    while the last distance used is right; only if that one was wrong (something in the
-    beam at a connection, a crowd faster than ``max_speed_mps``) is it, and only time
-    can tell. Refused, it costs the loop the crowd for as long (its ticks are not used:
-    a pass has fewer samples); taken, it is a crowd metres off (a pass tonnes off: 2 s
-    here let a 3 s block of dust move passes by 1 t, median; 5 s, by 27 kg,
-    ``bench/laser_strays.py --blocks``). So the longer of the two: about a pass's lift
-    and swing."""
+    them well out of the handle's reach) stays refused before it is taken as the target.
+    It cannot be the handle while the last distance used is right; only if that one was
+    wrong (something in the beam at a connection, a crowd faster than
+    ``max_speed_mps``) is it, and only time can tell. Refused, it costs the loop the
+    crowd for as long (its ticks are not used: a pass has fewer samples); taken, it is a
+    crowd metres off (a pass tonnes off: 2 s here let a 3 s block of dust move passes by
+    1 t, median; 5 s, by 27 kg, ``bench/laser_strays.py --blocks``). So the longer of
+    the two: about a pass's lift and swing."""
 
     @classmethod
     def from_config(cls, d: Mapping[str, Any]) -> Ar4000Config:
@@ -336,9 +336,9 @@ class Ar4000Driver(Driver):
     the one there is allows much: a distance must then also follow in the same way from
     the well-formed line just before it (so the first after a start or a long no-target
     stretch is reported invalid). Something else that stays in the beam (lines that
-    follow each other, the first a jump) stays a jump when the handle's reach grows to
-    it, until it has held for ``other_target_s`` (then it is taken as the target,
-    counted in ``extra["other_target"]``).
+    follow each other, the first out of reach by more than two samples' reach) stays a
+    jump when the handle's reach grows to it, until it has held for ``other_target_s``
+    (then it is taken as the target, counted in ``extra["other_target"]``).
 
     Health: ``bad_frames`` counts malformed lines, ``rejected_bytes`` their bytes,
     ``timeouts`` silent periods; ``extra`` carries ``no_target`` (zero readings),
@@ -497,9 +497,14 @@ class Ar4000Driver(Driver):
                 return False
             if follows(value, now, line, cfg):
                 return True
-        else:  # out of the handle's reach, or what was: something else in the beam
-            self._other = ((now, value, now, 1) if other is None
-                           else (other[0], value, now, other[3] + 1))
+        elif other is not None:  # what was out of reach, and stays: something else
+            self._other = (other[0], value, now, other[3] + 1)
+        elif used is not None and not follows(value, now,
+                                              (used[0], used[1] - 2 * cfg.interval_s), cfg):
+            # out of reach by more than two samples' reach: further than the handle can
+            # be even if the distance used was a corrupted line just inside the bound
+            # (off by up to that, with the handle moving away), so something else
+            self._other = (now, value, now, 1)
         self.health.extra["jumps"] += 1
         self._jumped.add(True)
         return False

@@ -139,6 +139,36 @@ def test_a_distance_is_used_only_if_the_handle_could_have_moved_there() -> None:
     assert used[-1] is None and drv.health.extra["jumps"] == 168
 
 
+@pytest.mark.parametrize(("step_mm", "catch_up"), [(50, (4, 7)), (58, (33, 37))])
+def test_a_corrupted_distance_used_does_not_lock_out_a_fast_handle(
+        step_mm: int, catch_up: tuple[int, int]) -> None:
+    """A corrupted line just inside the bound becomes the last distance used, 24 mm
+    from the one before and 74-82 mm behind the handle, which crowds away at 2.5 or 2.9
+    m/s: the handle's lines are out of reach at first (by 54 or 70 mm), but never
+    something else in the beam (they are within two samples' reach of it), and are used
+    again once the reach, growing 10 or 2 mm a sample faster than the handle moves, has
+    caught up with them."""
+    drv = Ar4000Driver("laser", Ar4000Config(port="/dev/null", sample_interval_us=20000))
+    used: list[float | None] = []
+
+    def line(mm: float, t: float) -> None:
+        out: list[Reading] = []
+        drv._parse(f"{round(mm)}\r\n".encode(), out.append, t)
+        used.append(out[0].values.get("distance_m"))
+        assert drv._other is None
+
+    line(4000, 0.00)
+    line(4000, 0.02)
+    line(4000 + step_mm, 0.04)
+    line(4000 + step_mm - 24, 0.06)  # a corrupted line; the handle is 2 steps on
+    for k in range(1, 60):
+        line(4000 + step_mm * (2 + k), 0.06 + 0.02 * k)
+    assert used[3] == pytest.approx((4000 + step_mm - 24) / 1000)
+    first = next(i for i in range(4, len(used)) if used[i] is not None)
+    assert catch_up[0] <= first - 4 <= catch_up[1] and all(u is not None for u in used[first:])
+    assert drv.health.extra["other_target"] == 0
+
+
 def test_the_jump_keys_are_checked() -> None:
     with pytest.raises(ValueError, match="'max_speed_mps' must be > 0"):
         Ar4000Config.from_config({"port": "/dev/null", "max_speed_mps": 0})
