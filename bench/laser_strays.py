@@ -15,12 +15,14 @@ has three).
 
 ``--blocks`` puts something in the beam that stays: in each pass, once, for a given
 time (a rope swinging through, a dust cloud that hangs), every line is a return 0.5-3
-m off the target (the same offset for the whole block, +-2 mm), placed at random
-its middle in the pass's lift and swing (the pass's last ``samples`` ticks before the
-dump), where the payload is estimated.
+m off the target (the same offset for the whole block, +-2 mm), its middle at a random
+time of the pass's lift and swing (the pass's last ``samples`` ticks before the dump),
+where the payload is estimated. ``--other-target-s`` sets how long the driver refuses
+such a thing before it takes it as the target.
 
     .venv/bin/python bench/laser_strays.py [--rates 0.005,0.02,0.05] [--seeds 10]
-    .venv/bin/python bench/laser_strays.py --blocks 0.1,0.3,1,3 [--seeds 10]
+    .venv/bin/python bench/laser_strays.py --blocks 0.1,0.3,1,3,10 [--seeds 10]
+        [--other-target-s 2]
 """
 
 from __future__ import annotations
