@@ -67,9 +67,8 @@ _LINE_RE = re.compile(rb"^ *(-?)(\d{1,7})(?:\.(\d{1,4}))? *$")
 NO_TARGET = 0.0
 REFERENCE_LINES = 5
 """Sample intervals for which the last distance used alone says where the next may be
-(after them a distance must also follow the line before it), and lines out of the
-handle's reach, following each other, that make something else in the beam (fewer are
-strays)."""
+(after them a distance must also follow the line before it); and for which something
+else in the beam is remembered between two of its lines."""
 
 
 def parse_line(line: bytes, unit_m: float) -> float | None:
@@ -87,11 +86,30 @@ def parse_line(line: bytes, unit_m: float) -> float | None:
     return (-value if sign else value) * unit_m
 
 
-def follows(value: float, t: float, ref: tuple[float, float], cfg: Ar4000Config) -> bool:
+def follows(value: float, t: float, ref: tuple[float, float], cfg: Ar4000Config,
+            slack: float = 0.0) -> bool:
     """Whether a distance at ``t`` is within what the handle moves from ``ref`` (value,
-    time) in the time between them (at least one sample interval), plus the noise."""
+    time) in the time between them (at least one sample interval), plus the noise (and
+    ``slack``)."""
     return abs(value - ref[0]) <= (cfg.max_speed_mps * max(t - ref[1], cfg.interval_s)
-                                   + cfg.jump_noise_m)
+                                   + cfg.jump_noise_m + slack)
+
+
+def _sample_reach(cfg: Ar4000Config) -> float:
+    """How far the handle moves in one sample interval at most."""
+    return cfg.max_speed_mps * cfg.interval_s
+
+
+@dataclass(slots=True)
+class OtherTarget:
+    """Something else in the laser's beam: lines that follow each other, the first of
+    them well out of the handle's reach."""
+
+    since: float
+    """When its first line came."""
+    last: float
+    """Its last distance (m) and that line's time."""
+    last_t: float
 
 
 class RecentShare:
@@ -335,10 +353,11 @@ class Ar4000Driver(Driver):
     no such distance, and after :data:`REFERENCE_LINES` sample intervals with none used
     the one there is allows much: a distance must then also follow in the same way from
     the well-formed line just before it (so the first after a start or a long no-target
-    stretch is reported invalid). Something else that stays in the beam (lines that
-    follow each other, the first out of reach by more than two samples' reach) stays a
-    jump when the handle's reach grows to it, until it has held for ``other_target_s``
-    (then it is taken as the target, counted in ``extra["other_target"]``).
+    stretch is reported invalid). Something else that stays in the beam (a line out of
+    reach by more than two samples' reach, and the lines after it each within a
+    sample's reach of the one before) stays a jump when the handle's reach grows to it,
+    until it has held for ``other_target_s`` (then it is taken as the target, counted in
+    ``extra["other_target"]``).
 
     Health: ``bad_frames`` counts malformed lines, ``rejected_bytes`` their bytes,
     ``timeouts`` silent periods; ``extra`` carries ``no_target`` (zero readings),
@@ -371,9 +390,8 @@ class Ar4000Driver(Driver):
         """The last well-formed line's value (metres, 0 for no target) and time."""
         self._used: tuple[float, float] | None = None
         """The last distance used and its time."""
-        self._other: tuple[float, float, float, int] | None = None
-        """Something else in the beam: since when, its last distance, that one's time and
-        how many lines (the jumps since the last distance used that follow each other)."""
+        self._other: OtherTarget | None = None
+        """Something else in the beam, refused since the last distance used."""
         self.health.extra.update({"no_target": 0, "implausible": 0, "jumps": 0,
                                   "other_target": 0,
                                   "silent": False, "babbling": False, "jumping": False})
@@ -474,37 +492,33 @@ class Ar4000Driver(Driver):
         used, other = self._used, self._other
         line = prev if prev is not None and prev[0] != NO_TARGET else None
         recent = cfg.interval_s * (REFERENCE_LINES + 0.5)
-        same = (other is not None and now - other[2] <= recent
-                and follows(value, now, other[1:3], cfg))
-        if not same:
-            other = None
-        if other is not None and now - other[0] >= cfg.other_target_s:
-            assert used is not None
-            self.health.extra["other_target"] += 1
-            log.warning("%s: AR4000 takes as its target what held %.1f s in the beam, "
-                        "%+.3f m from the last distance used", self.name, now - other[0],
-                        value - used[0])
-            return True
-        # a line or two out of reach are strays; from REFERENCE_LINES on, an object that
-        # keeps its place out of reach even when the reach grows to it
-        held = other is not None and other[3] >= REFERENCE_LINES
-        if not held and (used is None or follows(value, now, used, cfg)):
-            # within the handle's reach: and, with no recent distance used to say so,
-            # confirmed by the line before it
+        reach = used is None or follows(value, now, used, cfg)
+        if other is not None and not (now - other.last_t <= recent and abs(
+                value - other.last) <= _sample_reach(cfg) + cfg.jump_noise_m):
+            other = None  # gone, or not it (it moves no faster than the handle could)
+        if other is not None:
+            if now - other.since >= cfg.other_target_s:
+                assert used is not None
+                self.health.extra["other_target"] += 1
+                log.warning("%s: AR4000 takes as its target what held %.1f s in the beam, "
+                            "%+.3f m from the last distance used", self.name,
+                            now - other.since, value - used[0])
+                return True
+            other.last, other.last_t = value, now
+        elif reach:
+            # with no recent distance used to say so, confirmed by the line before it
             if used is not None and now - used[1] <= recent:
                 return True
             if line is None:
                 return False
             if follows(value, now, line, cfg):
                 return True
-        elif other is not None:  # what was out of reach, and stays: something else
-            self._other = (other[0], value, now, other[3] + 1)
-        elif used is not None and not follows(value, now,
-                                              (used[0], used[1] - 2 * cfg.interval_s), cfg):
+        elif used is not None and not follows(value, now, used, cfg,
+                                              slack=2 * _sample_reach(cfg)):
             # out of reach by more than two samples' reach: further than the handle can
             # be even if the distance used was a corrupted line just inside the bound
-            # (off by up to that, with the handle moving away), so something else
-            self._other = (now, value, now, 1)
+            # (off by up to that, with the handle moving away): something else
+            self._other = OtherTarget(now, value, now)
         self.health.extra["jumps"] += 1
         self._jumped.add(True)
         return False
