@@ -35,6 +35,7 @@ import shutil
 import statistics
 import tempfile
 import threading
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -73,24 +74,22 @@ def stray_capture(dst: Path, rate: float, seed: int, rule: bool,
         digits = whole.strip()
         t = line[0]["t"]
         block = next((off for a, b, off in blocks or () if a <= t < b), None)
-        if digits.isdigit() and int(digits) and block is not None:
-            new = f"{max(100, int(digits) + block + rng.randint(-2, 2))}\r\n".encode()
-            line = [{**line[0], "hex": new.hex()}]
-        elif rate and digits.isdigit() and int(digits) and rng.random() < rate:
-            mm = int(digits) + rng.choice((-1, 1)) * rng.randint(500, 3000)
-            new = f"{max(100, mm)}\r\n".encode()
-            line = [{**line[0], "hex": new.hex()}]  # the whole line at its first byte's time
+        mm = None
+        if digits.isdigit() and int(digits):
+            if block is not None:
+                mm = int(digits) + block + rng.randint(-2, 2)
+            elif rate and rng.random() < rate:
+                mm = int(digits) + rng.choice((-1, 1)) * rng.randint(500, 3000)
+        if mm is not None:  # the whole line at its first byte's time
+            line = [{**line[0], "hex": f"{max(100, mm)}\r\n".encode().hex()}]
         out.extend(json.dumps(r, separators=(",", ":")) for r in line)
         line = []
     out.extend(json.dumps(r, separators=(",", ":")) for r in line)
     (dst / "laser.serial.jsonl").write_text("\n".join(out) + "\n")
-    if laser:
+    config = {**(laser or {}), **({} if rule else {"max_speed_mps": 1e9})}
+    if config:
         man = json.loads((dst / "manifest.json").read_text())
-        man["devices"]["laser"]["config"].update(laser)
-        (dst / "manifest.json").write_text(json.dumps(man, indent=2))
-    if not rule:
-        man = json.loads((dst / "manifest.json").read_text())
-        man["devices"]["laser"]["config"]["max_speed_mps"] = 1e9
+        man["devices"]["laser"]["config"].update(config)
         (dst / "manifest.json").write_text(json.dumps(man, indent=2))
     return dst
 
@@ -142,37 +141,60 @@ def summary(errs: list[float]) -> tuple[float, float, float]:
     return statistics.median(errs), errs[int(0.9 * (len(errs) - 1))], errs[-1]
 
 
+def print_header(clean: dict[int, float], first: str, note: str = "") -> None:
+    print(f"clean capture: passes {[round(v, 1) for v in clean.values()]} kg{note}")
+    print(f"{first:>6s} {'rule':>4s} {'passes':>7s} {'lost':>5s} {'|err| median':>13s} "
+          f"{'p90':>8s} {'max':>8s} {'jumps/run':>10s}")
+
+
+def print_row(label: str, rule: bool, clean: dict[int, float], seeds: int,
+              make: Callable[[int], Path]) -> None:
+    """One row of the table: the capture ``make(seed)`` gives for each seed, replayed,
+    its passes against the clean capture's."""
+    errs: list[float] = []
+    lost = jumps = 0
+    for seed in range(1, seeds + 1):
+        cap = make(seed)
+        got = replay(cap)
+        jumps += got["jumps"]
+        have = dict(got["passes"])
+        for no, kg in clean.items():
+            if have.get(no) is not None:
+                errs.append(abs(have[no] - kg))
+            else:
+                lost += 1
+        shutil.rmtree(cap)
+    med, p90, top = summary(errs)
+    print(f"{label} {'on' if rule else 'off':>4s} {len(errs):7d} {lost:5d} "
+          f"{med:10.1f} kg {p90:5.0f} kg {top:5.0f} kg {jumps / seeds:10.1f}", flush=True)
+
+
+def run_rates(rates: list[float], seeds: int, tmp: Path) -> None:
+    """Stray lines, each line with probability ``rate``."""
+    clean = dict(replay(CAPTURE)["passes"])
+    print_header(clean, "rate")
+    for rate in rates:
+        for rule in (True, False):
+            print_row(f"{rate:6.3f}", rule, clean, seeds, lambda seed, rate=rate, rule=rule:
+                      stray_capture(tmp / f"r{rate}-{rule}-{seed}", rate, seed, rule))
+
+
 def run_blocks(durations: list[float], seeds: int, tmp: Path,
                laser: dict[str, Any] | None = None) -> None:
     """Something that stays in the beam, once a pass, for each of ``durations``."""
     base = replay(CAPTURE)
     clean = dict(base["passes"])
     start_unix = json.loads((CAPTURE / "manifest.json").read_text())["start_unix"]
-    print(f"clean capture: passes {[round(v, 1) for v in clean.values()]} kg; "
-          "one block a pass")
-    print(f"{'block':>6s} {'rule':>4s} {'passes':>7s} {'lost':>5s} {'|err| median':>13s} "
-          f"{'p90':>8s} {'max':>8s} {'jumps/run':>10s}")
+    print_header(clean, "block", "; one block a pass")
+
+    def make(seed: int, dur: float, rule: bool) -> Path:
+        blocks = pass_blocks(base["spans"], start_unix, dur, random.Random(seed))
+        return stray_capture(tmp / f"b{dur}-{rule}-{seed}", 0.0, seed, rule, blocks, laser)
+
     for dur in durations:
         for rule in (True, False):
-            errs: list[float] = []
-            lost = jumps = 0
-            for seed in range(1, seeds + 1):
-                blocks = pass_blocks(base["spans"], start_unix, dur, random.Random(seed))
-                cap = stray_capture(tmp / f"b{dur}-{rule}-{seed}", 0.0, seed, rule, blocks,
-                                    laser)
-                got = replay(cap)
-                jumps += got["jumps"]
-                have = dict(got["passes"])
-                for no, kg in clean.items():
-                    if have.get(no) is not None:
-                        errs.append(abs(have[no] - kg))
-                    else:
-                        lost += 1
-                shutil.rmtree(cap)
-            med, p90, top = summary(errs)
-            print(f"{dur:5.2f}s {'on' if rule else 'off':>4s} {len(errs):7d} {lost:5d} "
-                  f"{med:10.1f} kg {p90:5.0f} kg {top:5.0f} kg {jumps / seeds:10.1f}",
-                  flush=True)
+            print_row(f"{dur:5.2f}s", rule, clean, seeds,
+                      lambda seed, dur=dur, rule=rule: make(seed, dur, rule))
 
 
 def main() -> None:
@@ -186,39 +208,13 @@ def main() -> None:
                     help="the laser driver's other_target_s for --blocks (default: its own)")
     args = ap.parse_args()
     logging.disable(logging.WARNING)
-    if args.blocks:
-        with tempfile.TemporaryDirectory() as tmp:
+    with tempfile.TemporaryDirectory() as tmp:
+        if args.blocks:
             run_blocks([float(x) for x in args.blocks.split(",")], args.seeds, Path(tmp),
                        {"other_target_s": args.other_target_s} if args.other_target_s
                        else None)
-        return
-    with tempfile.TemporaryDirectory() as tmp:
-        clean = dict(replay(CAPTURE)["passes"])
-        print(f"clean capture: passes {[round(v, 1) for v in clean.values()]} kg")
-        print(f"{'rate':>6s} {'rule':>4s} {'passes':>7s} {'lost':>5s} {'|err| median':>13s} "
-              f"{'p90':>8s} {'max':>8s} {'jumps/run':>10s}")
-        for rate in (float(x) for x in args.rates.split(",")):
-            for rule in (True, False):
-                errs: list[float] = []
-                lost = jumps = 0
-                for seed in range(1, args.seeds + 1):
-                    cap = stray_capture(Path(tmp) / f"r{rate}-{rule}-{seed}", rate, seed, rule)
-                    got = replay(cap)
-                    jumps += got["jumps"]
-                    have = dict(got["passes"])
-                    for no, kg in clean.items():
-                        if no in have and have[no] is not None:
-                            errs.append(abs(have[no] - kg))
-                        else:
-                            lost += 1
-                    shutil.rmtree(cap)
-                errs.sort()
-                med = statistics.median(errs) if errs else float("nan")
-                p90 = errs[int(0.9 * (len(errs) - 1))] if errs else float("nan")
-                top = errs[-1] if errs else float("nan")
-                print(f"{rate:6.3f} {'on' if rule else 'off':>4s} {len(errs):7d} {lost:5d} "
-                      f"{med:10.1f} kg {p90:5.0f} kg {top:5.0f} kg {jumps / args.seeds:10.1f}",
-                      flush=True)
+        else:
+            run_rates([float(x) for x in args.rates.split(",")], args.seeds, Path(tmp))
 
 
 if __name__ == "__main__":
