@@ -95,11 +95,6 @@ def follows(value: float, t: float, ref: tuple[float, float], cfg: Ar4000Config,
                                    + cfg.jump_noise_m + slack)
 
 
-def _sample_reach(cfg: Ar4000Config) -> float:
-    """How far the handle moves in one sample interval at most."""
-    return cfg.max_speed_mps * cfg.interval_s
-
-
 @dataclass(slots=True)
 class OtherTarget:
     """Something else in the laser's beam: lines that follow each other, the first of
@@ -306,6 +301,11 @@ class Ar4000Config:
     def interval_s(self) -> float:
         return self.sample_interval_us * 1e-6
 
+    @property
+    def sample_reach_m(self) -> float:
+        """How far the handle moves in one sample interval at most."""
+        return self.max_speed_mps * self.interval_s
+
     def commands(self) -> list[bytes]:
         """The configuration commands, in the order they are sent."""
         term = self.terminator.encode()
@@ -494,7 +494,7 @@ class Ar4000Driver(Driver):
         recent = cfg.interval_s * (REFERENCE_LINES + 0.5)
         reach = used is None or follows(value, now, used, cfg)
         if other is not None and not (now - other.last_t <= recent and abs(
-                value - other.last) <= _sample_reach(cfg) + cfg.jump_noise_m):
+                value - other.last) <= cfg.sample_reach_m + cfg.jump_noise_m):
             other = None  # gone, or not it (it moves no faster than the handle could)
         if other is not None:
             if now - other.since >= cfg.other_target_s:
@@ -514,7 +514,7 @@ class Ar4000Driver(Driver):
             if follows(value, now, line, cfg):
                 return True
         elif used is not None and not follows(value, now, used, cfg,
-                                              slack=2 * _sample_reach(cfg)):
+                                              slack=2 * cfg.sample_reach_m):
             # out of reach by more than two samples' reach: further than the handle can
             # be even if the distance used was a corrupted line just inside the bound
             # (off by up to that, with the handle moving away): something else

@@ -3,6 +3,7 @@ a distance from a malformed line."""
 
 from __future__ import annotations
 
+import random
 import re
 
 import pytest
@@ -210,8 +211,6 @@ def test_the_handle_is_followed_through_strays_blocks_and_corrupted_digits(
     at the place of something that was in the beam, its lines cannot be told from that
     thing's (they are refused, up to ``other_target_s``), and something else after that
     may then be taken as the handle (docs/drivers-ar4000.md)."""
-    import random
-
     rng = random.Random(seed)
     n, dt = 2500, 0.02
     x, v, truth = rng.uniform(1.0, 4.0), 0.0, []

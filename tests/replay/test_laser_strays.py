@@ -3,6 +3,8 @@ passes stay those of the clean capture, which they do not without the driver's r
 
 from __future__ import annotations
 
+import json
+import random
 import sys
 from pathlib import Path
 
@@ -37,9 +39,6 @@ def test_something_that_stays_in_the_beam_for_a_second(
     the whole second by default (its ticks are not used, the passes stay within 0.3 % of
     the clean ones); taken once it has held for 0.1 s, as the driver did until
     2026-11-29 after five samples, it moves a pass by tonnes."""
-    import json
-    import random
-
     base = laser_strays.replay(laser_strays.CAPTURE)
     start = json.loads((laser_strays.CAPTURE / "manifest.json").read_text())["start_unix"]
     blocks = laser_strays.pass_blocks(base["spans"], start, 1.0, random.Random(4))
