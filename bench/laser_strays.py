@@ -10,19 +10,21 @@ into a copy of the committed capture's laser stream (each line, with probability
 replays it fast through the daemon's own code (``fast_replay_service``: the drivers,
 the loop, the estimator), with the driver's rule (the default) and without it
 (``max_speed_mps = 1e9`` in the capture's laser config). Each pass is compared with
-the clean capture's: the pass error in kilograms, and the passes lost (the capture
-has three).
+the clean capture's: the pass error in kilograms of the passes weighed, the passes
+published not weighed, and the passes lost (the capture has three).
 
 ``--blocks`` puts something in the beam that stays: in each pass, once, for a given
 time (a rope swinging through, a dust cloud that hangs), every line is a return 0.5-3
 m off the target (the same offset for the whole block, +-2 mm), its middle at a random
 time of the pass's lift and swing (the pass's last ``samples`` ticks before the dump),
 where the payload is estimated. ``--other-target-s`` sets how long the driver refuses
-such a thing before it takes it as the target.
+such a thing before it takes it as the target; ``--in-passes`` puts blocks in some
+passes only, to see what a block costs the passes around it (the engine does not weigh
+a pass across which, from its dig's start to its dump, the laser changed target).
 
     .venv/bin/python bench/laser_strays.py [--rates 0.005,0.02,0.05] [--seeds 10]
     .venv/bin/python bench/laser_strays.py --blocks 0.1,0.3,1,3,10 [--seeds 10]
-        [--other-target-s 2]
+        [--other-target-s 2] [--in-passes 2]
 """
 
 from __future__ import annotations
@@ -118,15 +120,19 @@ def replay(capture: Path) -> dict[str, Any]:
                        for m in passes],
             "spans": [(m["pass"], m["end"] - m["samples"] * TICK_S, m["end"])
                       for m in passes],
+            "reasons": {m["pass"]: m.get("reason", "") for m in passes if not m.get("valid")},
             "jumps": laser.get("jumps", 0)}
 
 
 def pass_blocks(spans: list[tuple[int, float, float]], start_unix: float, duration: float,
-                rng: random.Random) -> Blocks:
-    """One block of ``duration`` s in each pass, its middle at a random time of the
-    pass's lift and swing (where the payload is estimated; ``spans``)."""
+                rng: random.Random, only: set[int] | None = None) -> Blocks:
+    """One block of ``duration`` s in each pass (or in the passes numbered in ``only``),
+    its middle at a random time of the pass's lift and swing (where the payload is
+    estimated; ``spans``)."""
     out: Blocks = []
-    for _no, a, b in spans:
+    for no, a, b in spans:
+        if only is not None and no not in only:
+            continue
         a, b = a - start_unix, b - start_unix
         t0 = rng.uniform(a, b) - duration / 2
         out.append((t0, t0 + duration, rng.choice((-1, 1)) * rng.randint(500, 3000)))
@@ -143,29 +149,32 @@ def summary(errs: list[float]) -> tuple[float, float, float]:
 
 def print_header(clean: dict[int, float], first: str, note: str = "") -> None:
     print(f"clean capture: passes {[round(v, 1) for v in clean.values()]} kg{note}")
-    print(f"{first:>6s} {'rule':>4s} {'passes':>7s} {'lost':>5s} {'|err| median':>13s} "
-          f"{'p90':>8s} {'max':>8s} {'jumps/run':>10s}")
+    print(f"{first:>6s} {'rule':>4s} {'weighed':>7s} {'not':>4s} {'lost':>5s} "
+          f"{'|err| median':>13s} {'p90':>8s} {'max':>8s} {'jumps/run':>10s}")
 
 
 def print_row(label: str, rule: bool, clean: dict[int, float], seeds: int,
               make: Callable[[int], Path]) -> None:
     """One row of the table: the capture ``make(seed)`` gives for each seed, replayed,
-    its passes against the clean capture's."""
+    its passes against the clean capture's: the errors of those weighed, and how many
+    were published not weighed ("not") and not published at all ("lost")."""
     errs: list[float] = []
-    lost = jumps = 0
+    not_weighed = lost = jumps = 0
     for seed in range(1, seeds + 1):
         cap = make(seed)
         got = replay(cap)
         jumps += got["jumps"]
         have = dict(got["passes"])
         for no, kg in clean.items():
-            if have.get(no) is not None:
-                errs.append(abs(have[no] - kg))
-            else:
+            if no not in have:
                 lost += 1
+            elif have[no] is None:
+                not_weighed += 1
+            else:
+                errs.append(abs(have[no] - kg))
         shutil.rmtree(cap)
     med, p90, top = summary(errs)
-    print(f"{label} {'on' if rule else 'off':>4s} {len(errs):7d} {lost:5d} "
+    print(f"{label} {'on' if rule else 'off':>4s} {len(errs):7d} {not_weighed:4d} {lost:5d} "
           f"{med:10.1f} kg {p90:5.0f} kg {top:5.0f} kg {jumps / seeds:10.1f}", flush=True)
 
 
@@ -180,15 +189,17 @@ def run_rates(rates: list[float], seeds: int, tmp: Path) -> None:
 
 
 def run_blocks(durations: list[float], seeds: int, tmp: Path,
-               laser: dict[str, Any] | None = None) -> None:
-    """Something that stays in the beam, once a pass, for each of ``durations``."""
+               laser: dict[str, Any] | None = None, only: set[int] | None = None) -> None:
+    """Something that stays in the beam, once a pass (of those in ``only``), for each of
+    ``durations``."""
     base = replay(CAPTURE)
     clean = dict(base["passes"])
     start_unix = json.loads((CAPTURE / "manifest.json").read_text())["start_unix"]
-    print_header(clean, "block", "; one block a pass")
+    print_header(clean, "block", "; one block a pass" if only is None else
+                 f"; one block in pass {', '.join(map(str, sorted(only)))}")
 
     def make(seed: int, dur: float, rule: bool) -> Path:
-        blocks = pass_blocks(base["spans"], start_unix, dur, random.Random(seed))
+        blocks = pass_blocks(base["spans"], start_unix, dur, random.Random(seed), only)
         return stray_capture(tmp / f"b{dur}-{rule}-{seed}", 0.0, seed, rule, blocks, laser)
 
     for dur in durations:
@@ -206,12 +217,17 @@ def main() -> None:
                          "these durations (seconds), instead of stray lines")
     ap.add_argument("--other-target-s", type=float, default=None,
                     help="the laser driver's other_target_s for --blocks (default: its own)")
+    ap.add_argument("--in-passes", default="", metavar="N,N,...",
+                    help="--blocks only in these passes (default: every pass), to see "
+                         "what a block costs the passes around it")
     args = ap.parse_args()
     logging.disable(logging.WARNING)
     with tempfile.TemporaryDirectory() as tmp:
         if args.blocks:
             run_blocks([float(x) for x in args.blocks.split(",")], args.seeds, Path(tmp),
                        {"other_target_s": args.other_target_s} if args.other_target_s
+                       else None,
+                       {int(x) for x in args.in_passes.split(",")} if args.in_passes
                        else None)
         else:
             run_rates([float(x) for x in args.rates.split(",")], args.seeds, Path(tmp))

@@ -36,6 +36,13 @@ def check_keys(where: str, table: Mapping[str, Any], known: Iterable[str],
             raise ValueError(f"{where}: key {k!r} is required ({what})")
 
 
+TARGETS_TAKEN = "targets_taken"
+"""A quantity in a range finder's distance readings once it has taken something else in
+its beam as its target: how many times it has. A count, not an event, so that a reading
+the loop misses between two ticks cannot hide the change: the loop marks the tick where
+the count grows (``shoveld.sample.CROWD_TARGET_CHANGED``)."""
+
+
 @dataclass(slots=True)
 class Reading:
     """Decoded values from one device message, stamped with the host receive time.

@@ -35,11 +35,18 @@ class Sample:
     pitch_deg: float = math.nan
     payload_kg: float = math.nan
     invalid: frozenset[str] = field(default_factory=frozenset)
-    """Names of signals whose source is missing, stale or faulty at this instant."""
+    """Names of signals whose source is missing, stale or faulty at this instant, and
+    :data:`CROWD_TARGET_CHANGED` at the instant the crowd's laser changed target."""
 
     def as_row(self) -> list[float]:
         return [getattr(self, n) for n in COLUMN_NAMES]
 
+
+CROWD_TARGET_CHANGED = "crowd_target_changed"
+"""Not a signal: in ``Sample.invalid`` at the tick where the crowd's laser took something
+else in its beam as its target (``drivers.acuity.ar4000.TARGETS_TAKEN`` grew). The
+distances before and after it are not of the same thing, so the engine does not weigh
+the pass it falls in (from the dig's start to the dump)."""
 
 SIGNAL_FIELDS: tuple[str, ...] = tuple(f.name for f in fields(Sample) if f.name != "invalid")
 assert SIGNAL_FIELDS == COLUMN_NAMES, "Sample fields must follow the signals-table columns"

@@ -49,7 +49,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, fields
 from typing import Any
 
-from drivers.base import DeviceError, Driver, Reading, Sink, check_keys
+from drivers.base import TARGETS_TAKEN, DeviceError, Driver, Reading, Sink, check_keys
 from drivers.capture.clock import clock_wait_until
 from drivers.capture.tap import ByteTap, SerialFactory, open_serial
 from drivers.serialio import direct_reader
@@ -357,7 +357,8 @@ class Ar4000Driver(Driver):
     reach by more than two samples' reach, and the lines after it each within a
     sample's reach of the one before) stays a jump when the handle's reach grows to it,
     until it has held for ``other_target_s`` (then it is taken as the target, counted in
-    ``extra["other_target"]``).
+    ``extra["other_target"]``, and every later distance carries that count as
+    :data:`TARGETS_TAKEN`).
 
     Health: ``bad_frames`` counts malformed lines, ``rejected_bytes`` their bytes,
     ``timeouts`` silent periods; ``extra`` carries ``no_target`` (zero readings),
@@ -478,7 +479,9 @@ class Ar4000Driver(Driver):
             elif self._takes(value, now, prev):
                 self._used, self._other = (value, now), None
                 self._jumped.add(False)
-                out(Reading(self.name, now, {DISTANCE: value}))
+                taken = self.health.extra["other_target"]
+                out(Reading(self.name, now, {DISTANCE: value, TARGETS_TAKEN: float(taken)}
+                            if taken else {DISTANCE: value}))
             else:
                 out(Reading(self.name, now, {}, frozenset({DISTANCE})))
         self._update_babbling()

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from drivers.acuity.ar4000 import DISTANCE, Ar4000Driver, parse_line
-from drivers.base import DriverHealth
+from drivers.base import TARGETS_TAKEN, DriverHealth
 from drivers.spanio import RecordedStream, SpanResult
 
 _LF = 0x0A
@@ -192,5 +192,9 @@ class Ar4000SpanReader:
         taken = int(nl[n - 1]) + 1 if n else 0
         d._splitter._buf = bytearray(raw[taken:int(ends[nt - 1])])
         self.port.advance(int(chunks[nt - 1]))
-        return LineSpan(k0, nt, k0 + arrive, {DISTANCE: vals},
+        values = {DISTANCE: vals}
+        taken = h.extra["other_target"]
+        if taken:  # as each line's reading carries it (Ar4000Driver._parse)
+            values[TARGETS_TAKEN] = np.full(n, float(taken))
+        return LineSpan(k0, nt, k0 + arrive, values,
                         chunks[:nt] >= self.stream.chunk_count, base, cum)

@@ -7,7 +7,9 @@ and each ADC module its channels, whose names are signals-table columns. A signa
 put in ``Sample.invalid`` (and left NaN) when its device is disconnected, silent
 for longer than its ``max_age_s``, reported the quantity invalid, or gave a value
 outside the column's plausible range; the engine then makes no payload update from
-it, and the daemon says ``valid: false`` instead of publishing a number.
+it, and the daemon says ``valid: false`` instead of publishing a number. The tick
+where a laser's count of targets taken (``TARGETS_TAKEN``) first grows carries
+:data:`~shoveld.sample.CROWD_TARGET_CHANGED`.
 """
 
 from __future__ import annotations
@@ -17,11 +19,11 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from drivers.base import DriverHealth
+from drivers.base import TARGETS_TAKEN, DriverHealth
 from shoveld.daemon.config import LASER_KINDS, MTI_KINDS, DeviceConfig
 from shoveld.daemon.store import ReadingStore, Stored
 from shoveld.installation import Installation, unwrap_deg, wrap_deg
-from shoveld.sample import SIGNAL_FIELDS, Sample
+from shoveld.sample import CROWD_TARGET_CHANGED, SIGNAL_FIELDS, Sample
 from shoveld.signals.columns import BY_NAME
 
 ANGLE_KEYS = frozenset({"yaw_deg"})
@@ -95,6 +97,8 @@ class Assembler:
             self._plan.append((name, dev, kind, self.state[name], ranges, dev.max_age_s,
                                tuple(dev.signals), store.recent(name)))
         self._cache: dict[str, tuple[Any, ...]] = {}
+        self._taken: dict[str, float] = {}
+        """Per laser, the largest count of targets taken seen so far."""
         self._i_handle, self._i_swing, self._i_crowd = (_COL["handle_deg"], _COL["swing_deg"],
                                                         _COL["crowd_m"])
 
@@ -202,6 +206,10 @@ class Assembler:
                 pairs.append((self._i_crowd, v))
             else:
                 bad.append("crowd_m")
+            taken = r.values.get(TARGETS_TAKEN)
+            if taken is not None and taken > self._taken.get(name, 0.0):
+                self._taken[name] = taken  # once: not in the cache, which is reused
+                invalid.append(CROWD_TARGET_CHANGED)
         else:
             vals, rbad = r.values, r.invalid
             for sg, i, lo, hi in ranges:

@@ -42,7 +42,7 @@ from shoveld.model.output import CurrentEquations, current_sigma
 from shoveld.model.params import ModelParams
 from shoveld.payload.rls import PayloadRls, RlsConfig
 from shoveld.payload.trucks import Truck
-from shoveld.sample import Sample
+from shoveld.sample import CROWD_TARGET_CHANGED, Sample
 from shoveld.words import n_of
 
 log = logging.getLogger(__name__)
@@ -207,6 +207,14 @@ class Engine:
         self.pass_start = math.nan
         self.dig_end = math.nan
         self.invalid_updates = 0
+        self.target_changed_t = math.nan
+        """When the crowd's laser changed target (:data:`CROWD_TARGET_CHANGED`) in the
+        pass in progress, from its dig's start: it is not weighed, for its crowd is of
+        two things. Between passes a change costs nothing: a bench block of 10-20 s in
+        one pass left the passes on either side exact, where counting changes since the
+        last dump lost the next pass in 10 of 10 runs (bench/laser_strays.py
+        --in-passes 2)."""
+        self._target_ok = True
         self.truck = Truck(first_truck, self.cfg.truck_target_kg, list(truck_passes or []))
         self.last_dump_t = -math.inf
         self.last: LiveEstimate | None = None
@@ -235,6 +243,8 @@ class Engine:
             z_th = math.nan if "handle_deg" in bad else s.handle_deg * _RAD
             z_d = math.nan if "crowd_m" in bad else s.crowd_m
             z_sw = math.nan if "swing_deg" in bad else s.swing_deg * _RAD
+            if CROWD_TARGET_CHANGED in bad and self.rls is not None:
+                self.target_changed_t, self._target_ok = t, False
         else:
             z_th, z_d, z_sw = s.handle_deg * _RAD, s.crowd_m, s.swing_deg * _RAD
         th, thd, thdd, d, dd, ddd, sw, swd, swdd = update_joints(
@@ -277,7 +287,8 @@ class Engine:
             cached = self._cached
             if cached[0] != rls.n:  # the filter moves only when a block is applied
                 cached = self._cached = (rls.n, rls.payload_kg, self._std())
-            est = LiveEstimate(t, PHASES[ph], cached[1], cached[2], valid or not estimating)
+            est = LiveEstimate(t, PHASES[ph], cached[1], cached[2],
+                               (valid or not estimating) and self._target_ok)
         else:
             est = LiveEstimate(t, PHASES[ph], math.nan, math.nan, False)
         self.last = est
@@ -316,6 +327,7 @@ class Engine:
             self._cached = (-1, math.nan, math.nan)
             self.batch.clear()
             self.invalid_updates = 0
+            self.target_changed_t, self._target_ok = math.nan, True
         elif prev == DIG:
             self.dig_end = t
         if ph == DUMP and self.rls is not None:
@@ -358,10 +370,16 @@ class Engine:
 
     def _finish_pass(self, t: float) -> list[Event]:
         rls = self._final_filter()
-        valid = rls.n >= self.cfg.min_samples
-        reason = "" if valid else (
-            f"only {n_of(rls.n, 'valid sample', 'valid samples')} in lift and swing "
-            f"({self.invalid_updates} invalid)")
+        valid = rls.n >= self.cfg.min_samples and self._target_ok
+        if not self._target_ok:
+            at = self.target_changed_t - self.pass_start
+            reason = (f"the crowd laser changed target {at:+.1f} s from the pass's start: "
+                      "its distances before and after are not of the same thing")
+            self.target_changed_t, self._target_ok = math.nan, True
+        else:
+            reason = "" if valid else (
+                f"only {n_of(rls.n, 'valid sample', 'valid samples')} in lift and swing "
+                f"({self.invalid_updates} invalid)")
         pr = PassResult(self.pass_index, self.truck.index, self.pass_start, t, rls.payload_kg,
                         self._std(rls), rls.n, valid, reason)
         self.truck.passes.append(pr.as_dict())

@@ -29,7 +29,7 @@ import numpy as np
 
 from drivers.acuity.ar4000 import Ar4000Driver
 from drivers.acuity.span import Ar4000SpanReader
-from drivers.base import DriverHealth, Reading
+from drivers.base import TARGETS_TAKEN, DriverHealth, Reading
 from drivers.modbus_adc.driver import ModbusAdcDriver
 from drivers.modbus_adc.span import ModbusSpanReader
 from drivers.spanio import SpanResult
@@ -40,12 +40,14 @@ from shoveld.daemon.config import LASER_KINDS, MTI_KINDS, DeviceConfig
 from shoveld.daemon.store import ReadingStore
 from shoveld.installation import Installation
 from shoveld.replay.sync import MemoryModbus, MemorySerial, SyncDevice, SyncReplay
-from shoveld.sample import SIGNAL_FIELDS, Sample
+from shoveld.sample import CROWD_TARGET_CHANGED, SIGNAL_FIELDS, Sample
 from shoveld.signals.columns import BY_NAME
 
 _COL = {name: i for i, name in enumerate(SIGNAL_FIELDS)}
-_BIT = {name: 1 << i for i, name in enumerate(SIGNAL_FIELDS)}
-"""A bit per signal, for a tick's invalid set as one integer."""
+_MARKS = (*SIGNAL_FIELDS, CROWD_TARGET_CHANGED)
+_BIT = {name: 1 << i for i, name in enumerate(_MARKS)}
+"""A bit per signal (and for the laser's change of target), for a tick's invalid set as
+one integer."""
 _EMPTY: frozenset[str] = frozenset()
 SpanReader = MtiSpanReader | Ar4000SpanReader | ModbusSpanReader
 """A driver's reads of a run of ticks at once (``read(k0, k1)``; None where it cannot)."""
@@ -63,7 +65,7 @@ def _keys(dev: DeviceConfig) -> tuple[str, ...]:
     if dev.kind in MTI_KINDS:
         return ("pitch_deg", "yaw_deg")
     if dev.kind in LASER_KINDS:
-        return ("distance_m",)
+        return ("distance_m", TARGETS_TAKEN)
     return tuple(dev.signals)
 
 
@@ -211,6 +213,8 @@ class BulkFeed:
             elif isinstance(drv, ModbusAdcDriver) and isinstance(port, MemoryModbus):
                 self._readers[name] = ModbusSpanReader(drv, port, port.registers, self.period)
         self._swing_prev = math.nan
+        self._taken: dict[str, float] = {}
+        """Per laser, the largest count of targets taken so far (as the assembler's)."""
         self._next_health = -math.inf
         self.ticks = 0
         """Ticks produced so far; after the last span, the replay's length in ticks."""
@@ -373,6 +377,8 @@ class BulkFeed:
         cols = [c.array()[j] if len(c) else np.full(n, np.nan) for c in tr.cols]
         sig_bad = self._contribute(dev, cols, live, rows)
         bad |= sig_bad
+        if dev.kind in LASER_KINDS:
+            bad |= self._target_changed(name, cols[1], live)
         state[live & (sig_bad != 0)] = INVALID
 
         def invalid_at(i: int) -> list[str]:
@@ -412,7 +418,7 @@ class BulkFeed:
             out, self._swing_prev = unwrapped_swing(inst, yaw[at], self._swing_prev)
             rows[at, _COL["swing_deg"]] = out
         elif dev.kind in LASER_KINDS:
-            (v,) = cols
+            v = cols[0]
             crowd = inst.crowd_m(v)  # NaN stays NaN
             lo, hi = BY_NAME["crowd_m"].lo, BY_NAME["crowd_m"].hi
             ok = (lo <= crowd) & (crowd <= hi)
@@ -426,6 +432,14 @@ class BulkFeed:
                 sig_bad[live & ~ok] |= _BIT[sg]
         return sig_bad
 
+    def _target_changed(self, name: str, taken: np.ndarray, live: np.ndarray) -> np.ndarray:
+        """:data:`CROWD_TARGET_CHANGED`'s bit at each live tick whose newest reading's
+        count of targets taken is above all before it (the assembler's rule)."""
+        seen = np.where(live & ~np.isnan(taken), taken, -np.inf)
+        top = np.maximum.accumulate(np.concatenate([[self._taken.get(name, 0.0)], seen]))
+        self._taken[name] = float(top[-1])
+        return np.where(top[1:] > top[:-1], _BIT[CROWD_TARGET_CHANGED], 0)
+
     @staticmethod
     def _samples(rows: np.ndarray, bad: np.ndarray) -> list[Sample]:
         """Sample objects of the rows; one frozenset per distinct invalid pattern."""
@@ -433,7 +447,7 @@ class BulkFeed:
         bits = bad.tolist()
         for b in set(bits):  # not np.unique: its first call imports numpy.ma (10 ms)
             if b:
-                sets[b] = frozenset(sg for i, sg in enumerate(SIGNAL_FIELDS) if b >> i & 1)
+                sets[b] = frozenset(sg for i, sg in enumerate(_MARKS) if b >> i & 1)
         # Sample called through map over the columns: no argument list built per row.
         # Without the cyclic collector meanwhile: samples hold only numbers and sets, so
         # there is no cycle to find, and each of the collections the 6,000 new objects

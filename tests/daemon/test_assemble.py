@@ -6,11 +6,12 @@ import math
 
 import pytest
 
-from drivers.base import DriverHealth, Reading
+from drivers.base import TARGETS_TAKEN, DriverHealth, Reading
 from shoveld.daemon.assemble import Assembler
 from shoveld.daemon.store import ReadingStore
 from shoveld.installation import Installation
 from shoveld.replay.table import table_devices
+from shoveld.sample import CROWD_TARGET_CHANGED
 
 INST = Installation(handle_pitch_offset_deg=2.0, handle_pitch_sign=-1.0,
                     swing_yaw_zero_deg=170.0, crowd_offset_m=6.0, crowd_gain=1.1)
@@ -111,6 +112,32 @@ def test_reported_invalid_and_implausible_values() -> None:
     assert s.hoist1_a == 1000.0
     assert asm.state["laser"].state == "invalid"
     assert asm.state["adc_motors"].invalid == ["crowd_a", "hoist2_a"]
+
+
+def test_a_change_of_laser_target_marks_one_tick() -> None:
+    """The tick that first uses a reading whose count of targets taken has grown is
+    marked, once: not again while that reading is held, nor when a distance carries the
+    same count after a no-target line, nor where a reading it missed between two ticks
+    had the new count first."""
+    store, asm = setup()
+    marks = []
+
+    def tick(t: float, laser: Reading | None) -> None:
+        feed_all(store, t)
+        if laser is not None:
+            store.put("laser", laser)
+        marks.append(CROWD_TARGET_CHANGED in asm.sample(t).invalid)
+
+    tick(1.00, None)
+    tick(1.01, Reading("laser", 1.01, {"distance_m": 2.5, TARGETS_TAKEN: 1.0}))
+    store.put("mti", Reading("mti", 1.02, {"pitch_deg": 10.0, "yaw_deg": 175.0}))
+    marks.append(CROWD_TARGET_CHANGED in asm.sample(1.02).invalid)  # the same laser reading
+    tick(1.03, Reading("laser", 1.03, {}, frozenset({"distance_m"})))  # no target
+    tick(1.04, Reading("laser", 1.04, {"distance_m": 2.5, TARGETS_TAKEN: 1.0}))
+    store.put("laser", Reading("laser", 1.045, {"distance_m": 2.0, TARGETS_TAKEN: 2.0}))
+    tick(1.05, Reading("laser", 1.05, {"distance_m": 2.0, TARGETS_TAKEN: 2.0}))
+    tick(1.06, Reading("laser", 1.06, {"distance_m": 2.0, TARGETS_TAKEN: 2.0}))
+    assert marks == [False, True, False, False, False, True, False]
 
 
 def test_new_arrivals_are_reported_once() -> None:

@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from drivers.acuity.ar4000 import Ar4000Config, Ar4000Driver, LineSplitter, parse_line
-from drivers.base import Reading
+from drivers.base import TARGETS_TAKEN, Reading
 
 WELL_FORMED = re.compile(rb"^ *-?\d{1,7}(\.\d{1,4})? *$")
 
@@ -93,12 +93,14 @@ def test_a_distance_is_used_only_if_the_handle_could_have_moved_there() -> None:
     drv = Ar4000Driver("laser", Ar4000Config(port="/dev/null", sample_interval_us=20000,
                                              other_target_s=2.0))
     used: list[float | None] = []
+    counts: list[float | None] = []
 
     def line(mm: int, t: float) -> None:
         out: list[Reading] = []
         drv._parse(f"{mm}\r\n".encode(), out.append, t)
         (r,) = out
         used.append(r.values.get("distance_m"))
+        counts.append(r.values.get(TARGETS_TAKEN))
 
     line(4910, 0.00)  # nothing to follow from yet
     line(4912, 0.02)
@@ -136,6 +138,8 @@ def test_a_distance_is_used_only_if_the_handle_could_have_moved_there() -> None:
         line(2000 + i % 3, 2.66 + 0.02 * i)
     assert used[-101:-1] == [None] * 100 and used[-1] == pytest.approx(2.001, abs=1e-12)
     assert drv.health.extra["other_target"] == 1 and drv.health.extra["jumps"] == 167
+    # the distances from then on say so (the loop marks the tick: the pass is not weighed)
+    assert counts[-1] == 1.0 and counts[:-1] == [None] * (len(counts) - 1)
     line(7080, 4.68)  # ... and the handle is then what is out of reach, for a while
     assert used[-1] is None and drv.health.extra["jumps"] == 168
 

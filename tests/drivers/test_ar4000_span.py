@@ -15,7 +15,7 @@ import pytest
 
 from drivers.acuity.ar4000 import DISTANCE, Ar4000Driver, parse_line
 from drivers.acuity.span import Ar4000SpanReader, digit_lines
-from drivers.base import Reading
+from drivers.base import TARGETS_TAKEN, Reading
 from drivers.capture.format import read_capture
 from shoveld.daemon.config import DeviceConfig, device_signals
 from shoveld.replay.sync import MemorySerial, StepClock, SyncDevice, SyncReplay
@@ -51,17 +51,34 @@ def _damage(stream: list[tuple[float, bytes]], t0: float, t1: float, babble: boo
     return out
 
 
-def _setup(edits: list[tuple[float, float, bool]], gap: tuple[float, float] | None = None
+def _block(stream: list[tuple[float, bytes]], t0: float, t1: float, mm: int
+           ) -> list[tuple[float, bytes]]:
+    """Every line in [t0, t1) replaced by ``mm``: something that stays in the beam."""
+    out = []
+    for t, data in stream:
+        if t0 <= t < t1 and data.endswith(b"\n"):
+            data = f"{mm}\r\n".encode()
+            if out and not out[-1][1].endswith(b"\n"):  # the line's first bytes
+                out[-1] = (out[-1][0], b"")
+        out.append((t, data))
+    return out
+
+
+def _setup(edits: list[tuple[float, float, bool]], gap: tuple[float, float] | None = None,
+           blocks: tuple[tuple[float, float, int], ...] = (), **laser: Any
            ) -> tuple[Ar4000Driver, MemorySerial, StepClock]:
     cap = read_capture(CAPTURE)
     d = dict(cap.devices["laser"].settings["config"])
     d["kind"] = "ar4000"
+    d.update(laser)
     sync = SyncReplay(cap, {"laser": DeviceConfig("laser", "ar4000", d, 0.5,
                                                   device_signals("ar4000", d))})
     port: MemorySerial = sync.transports["laser"]
     stream = list(port.stream)
     for t0, t1, babble in edits:
         stream = _damage(stream, t0, t1, babble)
+    for block in blocks:
+        stream = _block(stream, *block)
     if gap is not None:
         stream = [c for c in stream if not gap[0] <= c[0] < gap[1]]
     port.stream[:] = stream
@@ -80,13 +97,15 @@ def _play(driver: Ar4000Driver, port: MemorySerial, clock: StepClock, ticks: int
     def sink(r: Reading) -> None:
         v = r.values.get(DISTANCE, math.nan)
         readings.append((at[0], r.t_host, "nan" if math.isnan(v) else v,
-                         tuple(sorted(r.invalid))))
+                         tuple(sorted(r.invalid)), r.values.get(TARGETS_TAKEN)))
 
     def span_rows(got: Any) -> None:
+        taken = got.values.get(TARGETS_TAKEN)
         for i, tick in enumerate(got.reading_ticks.tolist()):
             v = float(got.values[DISTANCE][i])
             readings.append((tick, tick * PERIOD, "nan" if math.isnan(v) else v,
-                             (DISTANCE,) if math.isnan(v) else ()))
+                             (DISTANCE,) if math.isnan(v) else (),
+                             None if taken is None else float(taken[i])))
 
     dev = SyncDevice("laser", driver, port, sink, clock)
     reader = Ar4000SpanReader(driver, port, PERIOD) if window else None
@@ -114,6 +133,19 @@ def test_span_reads_match_per_tick_reads_on_a_damaged_line(window: int) -> None:
     assert not any(r[2] == 1.5 for r in a[0])
     assert h["timeouts"] == 1 and h["reconnects"] == 1
     assert any(x["babbling"] for x in a[1])
+    assert a == b
+
+
+@pytest.mark.parametrize("window", [1000, 41])
+def test_span_reads_carry_the_count_of_targets_taken(window: int) -> None:
+    """Something stays in the beam for 0.6 s twice, taken after 0.2 s each time, and
+    the handle after it: four targets taken. The distances after each carry the count,
+    from the span reads as from the per-tick reads."""
+    blocks = ((5.0, 5.6, 1500), (12.0, 12.6, 9000))
+    a = _play(*_setup([], blocks=blocks, other_target_s=0.2), 3000, None)
+    b = _play(*_setup([], blocks=blocks, other_target_s=0.2), 3000, window)
+    assert a[1][-1]["other_target"] == 4
+    assert [r[4] for r in a[0] if r[1] > 20.0][-1] == 4.0
     assert a == b
 
 

@@ -24,7 +24,7 @@ from shoveld.installation import Installation, unwrap_deg
 from shoveld.model.params import load_params
 from shoveld.replay.bulk import unwrapped_swing
 from shoveld.replay.service import fast_replay_service
-from shoveld.sample import Sample
+from shoveld.sample import CROWD_TARGET_CHANGED, Sample
 
 HOST_TIMED = ("zenoh", "pass_log", "ok")
 """Health fields that depend on host timing (threads, sockets), not on the replay."""
@@ -146,6 +146,32 @@ def test_a_silent_mti_times_out_in_capture_time_alike(tmp_path: Path) -> None:
     mti = stepped["health"][-1]["drivers"]["mti"]
     assert mti["timeouts"] >= 1 and mti["reconnects"] >= 1 and mti["connected"]
     assert [_row(s) for s in bulk["samples"]] == [_row(s) for s in stepped["samples"]]
+    assert bulk["health"] == stepped["health"]
+
+
+def test_a_laser_that_changes_target_is_marked_alike(tmp_path: Path) -> None:
+    """Something stays in the laser's beam for 2 s in each pass, taken as the target
+    after 0.5 s, and left for the handle 0.5 s after it goes: both feeders mark the same
+    ticks (the count of targets taken, carried by the readings, grows there; short
+    spans, so a mark can fall on a span's edge), and no pass is weighed."""
+    import random
+    import sys
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
+    import laser_strays
+
+    base = laser_strays.replay(laser_strays.CAPTURE)
+    start = json.loads((laser_strays.CAPTURE / "manifest.json").read_text())["start_unix"]
+    blocks = laser_strays.pass_blocks(base["spans"], start, 2.0, random.Random(7))
+    capture = laser_strays.stray_capture(tmp_path / "c", 0.0, 7, True, blocks,
+                                         {"other_target_s": 0.5})
+    stepped = _replay(capture, tmp_path, bulk=False)
+    bulk = _replay(capture, tmp_path, bulk=True, span_ticks=250)
+    marked = [i for i, s in enumerate(stepped["samples"]) if CROWD_TARGET_CHANGED in s.invalid]
+    assert len(marked) == 2 * len(blocks)  # onto it, and back to the handle
+    assert [_row(s) for s in bulk["samples"]] == [_row(s) for s in stepped["samples"]]
+    assert len(stepped["pass"]) == 3 and bulk["pass"] == stepped["pass"]
+    assert not any(p["valid"] for p in stepped["pass"])
+    assert all("laser changed target" in p["reason"] for p in stepped["pass"])
     assert bulk["health"] == stepped["health"]
 
 

@@ -37,8 +37,9 @@ def test_something_that_stays_in_the_beam_for_a_second(
         tmp_path: Path, clean: dict[int, float], other_target_s: float | None) -> None:
     """A second of something else in the beam in each pass's lift and swing: refused for
     the whole second by default (its ticks are not used, the passes stay within 0.3 % of
-    the clean ones); taken once it has held for 0.1 s, as the driver did until
-    2026-11-29 after five samples, it moves a pass by tonnes."""
+    the clean ones); taken once it has held for 0.1 s (as the driver did until
+    2026-11-29 after five samples; it moved a pass by tonnes), the laser changes target
+    twice in each pass, and no pass is weighed."""
     base = laser_strays.replay(laser_strays.CAPTURE)
     start = json.loads((laser_strays.CAPTURE / "manifest.json").read_text())["start_unix"]
     blocks = laser_strays.pass_blocks(base["spans"], start, 1.0, random.Random(4))
@@ -46,9 +47,11 @@ def test_something_that_stays_in_the_beam_for_a_second(
     got = laser_strays.replay(laser_strays.stray_capture(tmp_path / "c", 0.0, 4, True, blocks,
                                                          laser))
     assert sorted(dict(got["passes"])) == sorted(clean)
-    assert all(kg is not None for _, kg in got["passes"])
-    err = max(abs(kg - clean[no]) for no, kg in got["passes"])
     if other_target_s is None:  # about 50 lines a block, each refused
+        assert all(kg is not None for _, kg in got["passes"])
+        err = max(abs(kg - clean[no]) for no, kg in got["passes"])
         assert got["jumps"] >= 3 * 45 and err < 0.003 * min(clean.values())
     else:
-        assert got["jumps"] < 3 * 20 and err > 1000.0
+        assert got["jumps"] < 3 * 20
+        assert all(kg is None for _, kg in got["passes"])
+        assert all("laser changed target" in why for why in got["reasons"].values())
