@@ -373,8 +373,7 @@ class Engine:
         valid = rls.n >= self.cfg.min_samples and self._target_ok
         if not self._target_ok:
             at = self.target_changed_t - self.pass_start
-            reason = (f"the crowd laser changed target {at:+.1f} s from the pass's start: "
-                      "its distances before and after are not of the same thing")
+            reason = f"the crowd laser changed target {at:.1f} s into the pass"
             self.target_changed_t, self._target_ok = math.nan, True
         else:
             reason = "" if valid else (

@@ -7,6 +7,7 @@ tested directly.
 from __future__ import annotations
 
 import math
+import re
 from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any
@@ -16,6 +17,15 @@ from shoveld.payload.trucks import Truck, rule_101020
 EXCHANGE_GAP_S = 120.0
 """Passes further apart than this are not one cycle after the other (a truck exchange,
 a break): their interval is not a cycle time."""
+
+
+_NUMBER = re.compile(r"\d+(?:[.,]\d+)*")
+
+
+def reason_kind(reason: str) -> str:
+    """A reason with its numbers as N, so that the passes not weighed for one cause are
+    counted together ("the crowd laser changed target N s into the pass")."""
+    return _NUMBER.sub("N", reason) if reason else "unknown"
 
 
 @dataclass
@@ -30,6 +40,7 @@ class ShiftFigures:
     cycle_s: list[float] = field(default_factory=list)
     invalid: list[dict[str, Any]] = field(default_factory=list)
     reasons: Counter[str] = field(default_factory=Counter)
+    """Passes not weighed by the kind of reason (:func:`reason_kind`)."""
 
     @property
     def valid_kg(self) -> list[float]:
@@ -78,5 +89,5 @@ def shift_figures(rows: list[dict[str, Any]], since: float | None = None,
         if a["truck"] == b["truck"] and 0 < gap <= EXCHANGE_GAP_S:
             f.cycle_s.append(gap)
     f.invalid = [r for r in rows if not r["valid"]]
-    f.reasons = Counter(str(r["reason"] or "unknown") for r in f.invalid)
+    f.reasons = Counter(reason_kind(str(r["reason"] or "")) for r in f.invalid)
     return f

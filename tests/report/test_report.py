@@ -68,6 +68,26 @@ def test_report_tables_and_page(tmp_path: Path) -> None:
         assert (out / f"{name}.png").stat().st_size > 5000
 
 
+def test_passes_not_weighed_are_counted_by_the_kind_of_reason(tmp_path: Path) -> None:
+    """Reasons that differ only in their numbers are one kind; the table keeps each."""
+    log = PassLog(db_path(tmp_path), "s1")
+    reasons = ["the crowd laser changed target 12.3 s into the pass",
+               "only 12 valid samples in lift and swing (1,030 invalid)",
+               "the crowd laser changed target 4.0 s into the pass"]
+    for n, why in enumerate(reasons, 1):
+        t = T0 + 50.0 * n
+        log.write_pass({"pass": n, "truck": 1, "payload_kg": None, "std_kg": None,
+                        "start_s": t - T0, "end_s": t - T0 + 20, "samples": 12,
+                        "valid": False, "reason": why}, t, t + 20.0, TARGET)
+    log.close()
+    out = tmp_path / "r"
+    assert main(["report", "--db", str(db_path(tmp_path)), "--out", str(out)]) == 0
+    page = (out / "index.html").read_text()
+    assert all(why in page for why in reasons)
+    assert ("By reason: the crowd laser changed target N s into the pass: 2; "
+            "only N valid samples in lift and swing (N invalid): 1</p>") in page
+
+
 def test_report_of_a_period_and_of_an_empty_log(tmp_path: Path, capsys) -> None:
     db, made = shift(tmp_path)
     out = tmp_path / "r2"
