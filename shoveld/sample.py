@@ -44,7 +44,7 @@ class Sample:
 
 CROWD_TARGET_CHANGED = "crowd_target_changed"
 """Not a signal: in ``Sample.invalid`` at the tick where the crowd's laser took something
-else in its beam as its target (``drivers.acuity.ar4000.TARGETS_TAKEN`` grew). The
+else in its beam as its target (``drivers.base.TARGETS_TAKEN`` grew). The
 distances before and after it are not of the same thing, so the engine does not weigh
 the pass it falls in (from the dig's start to the dump)."""
 
