@@ -25,6 +25,7 @@ a pass across which, from its dig's start to its dump, the laser changed target)
     .venv/bin/python bench/laser_strays.py [--rates 0.005,0.02,0.05] [--seeds 10]
     .venv/bin/python bench/laser_strays.py --blocks 0.1,0.3,1,3,10 [--seeds 10]
         [--other-target-s 2] [--in-passes 2]
+    .venv/bin/python bench/laser_strays.py --lodged [--seeds 10]
 """
 
 from __future__ import annotations
@@ -55,14 +56,17 @@ in mm."""
 
 
 def stray_capture(dst: Path, rate: float, seed: int, rule: bool,
-                  blocks: Blocks | None = None, laser: dict[str, Any] | None = None) -> Path:
+                  blocks: Blocks | None = None, laser: dict[str, Any] | None = None,
+                  lodged: tuple[float, int] | None = None) -> Path:
     """A copy of the capture with stray returns in the laser's lines, and lines inside
     ``blocks`` off by the block's offset (and the rule off in its laser config if not
-    ``rule``)."""
+    ``rule``); with ``lodged`` (from, offset in mm), every line from then on reads one
+    distance, the handle's then plus the offset: something lodged in the beam."""
     shutil.copytree(CAPTURE, dst)
     rng = random.Random(seed)
     src = (CAPTURE / "laser.serial.jsonl").read_text().splitlines()
     out, line = [src[0]], []  # header; the chunks of the line being received
+    still: int | None = None  # the lodged thing's distance, once it is there
     for text in src[1:]:
         rec = json.loads(text)
         if rec["d"] != "rx":
@@ -73,17 +77,26 @@ def stray_capture(dst: Path, rate: float, seed: int, rule: bool,
         if not data.endswith(b"\n"):
             continue
         whole = b"".join(bytes.fromhex(r["hex"]) for r in line)
-        digits = whole.strip()
         t = line[0]["t"]
         block = next((off for a, b, off in blocks or () if a <= t < b), None)
-        mm = None
-        if digits.isdigit() and int(digits):
-            if block is not None:
-                mm = int(digits) + block + rng.randint(-2, 2)
-            elif rate and rng.random() < rate:
-                mm = int(digits) + rng.choice((-1, 1)) * rng.randint(500, 3000)
-        if mm is not None:  # the whole line at its first byte's time
-            line = [{**line[0], "hex": f"{max(100, mm)}\r\n".encode().hex()}]
+        texts, changed = [], False  # a chunk may end more than one line
+        for text in whole.split(b"\n")[:-1]:
+            digits = text.strip()
+            mm = None
+            if lodged is not None and t >= lodged[0] and digits.isdigit():
+                if still is None and int(digits):
+                    still = int(digits) + lodged[1]
+                if still is not None:
+                    mm = still + rng.randint(-2, 2)
+            elif digits.isdigit() and int(digits):
+                if block is not None:
+                    mm = int(digits) + block + rng.randint(-2, 2)
+                elif rate and rng.random() < rate:
+                    mm = int(digits) + rng.choice((-1, 1)) * rng.randint(500, 3000)
+            changed |= mm is not None
+            texts.append(text if mm is None else f"{max(100, mm)}\r".encode())
+        if changed:  # the whole chunk at its first byte's time
+            line = [{**line[0], "hex": (b"\n".join(texts) + b"\n").hex()}]
         out.extend(json.dumps(r, separators=(",", ":")) for r in line)
         line = []
     out.extend(json.dumps(r, separators=(",", ":")) for r in line)
@@ -208,6 +221,23 @@ def run_blocks(durations: list[float], seeds: int, tmp: Path,
                       lambda seed, dur=dur, rule=rule: make(seed, dur, rule))
 
 
+def run_lodged(seeds: int, tmp: Path) -> None:
+    """Something lodged in the beam in the return after pass 1, there to the end."""
+    base = replay(CAPTURE)
+    clean = dict(base["passes"])
+    start_unix = json.loads((CAPTURE / "manifest.json").read_text())["start_unix"]
+    print_header(clean, "lodged", "; something lodged in the beam after pass 1's dump")
+    end1 = base["spans"][0][2] - start_unix
+
+    def make(seed: int, rule: bool) -> Path:
+        rng = random.Random(seed)
+        lodged = (end1 + rng.uniform(0.5, 3.0), rng.choice((-1, 1)) * rng.randint(500, 3000))
+        return stray_capture(tmp / f"l{rule}-{seed}", 0.0, seed, rule, lodged=lodged)
+
+    for rule in (True, False):
+        print_row(f"{'':>6s}", rule, clean, seeds, lambda seed, rule=rule: make(seed, rule))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--rates", default="0.005,0.02,0.05")
@@ -217,13 +247,17 @@ def main() -> None:
                          "these durations (seconds), instead of stray lines")
     ap.add_argument("--other-target-s", type=float, default=None,
                     help="the laser driver's other_target_s for --blocks (default: its own)")
+    ap.add_argument("--lodged", action="store_true",
+                    help="something lodged in the beam after pass 1's dump, to the end")
     ap.add_argument("--in-passes", default="", metavar="N,N,...",
                     help="--blocks only in these passes (default: every pass), to see "
                          "what a block costs the passes around it")
     args = ap.parse_args()
     logging.disable(logging.WARNING)
     with tempfile.TemporaryDirectory() as tmp:
-        if args.blocks:
+        if args.lodged:
+            run_lodged(args.seeds, Path(tmp))
+        elif args.blocks:
             run_blocks([float(x) for x in args.blocks.split(",")], args.seeds, Path(tmp),
                        {"other_target_s": args.other_target_s} if args.other_target_s
                        else None,

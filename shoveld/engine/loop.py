@@ -94,6 +94,12 @@ class EngineConfig:
     as before 2026-11-27 (docs/engine.md, "The settle time, tested")."""
     min_samples: int = 40
     """A pass with fewer valid payload updates is reported invalid."""
+    min_crowd_travel_m: float = 0.25
+    """A pass whose crowd moved less than this from its dig's start to its dump is
+    reported invalid: a dig crowds the dipper into the bank (the simulator's passes
+    travel 2.3-3.5 m; the handle's stroke is 6-10.8 m), so a crowd that stands still
+    is a laser measuring something else (lodged in its beam, taken between passes) or
+    stuck. 0: no such test."""
     hoist_field_nominal_a: float = 70.0
     weak_field_fraction: float = 0.97
     phases: PhaseConfig = field(default_factory=PhaseConfig)
@@ -215,6 +221,8 @@ class Engine:
         last dump lost the next pass in 10 of 10 runs (bench/laser_strays.py
         --in-passes 2)."""
         self._target_ok = True
+        self._crowd_lo, self._crowd_hi = math.inf, -math.inf
+        """The pass's smallest and largest crowd so far (``min_crowd_travel_m``)."""
         self.truck = Truck(first_truck, self.cfg.truck_target_kg, list(truck_passes or []))
         self.last_dump_t = -math.inf
         self.last: LiveEstimate | None = None
@@ -249,6 +257,10 @@ class Engine:
             z_th, z_d, z_sw = s.handle_deg * _RAD, s.crowd_m, s.swing_deg * _RAD
         th, thd, thdd, d, dd, ddd, sw, swd, swdd = update_joints(
             self.f_th, self.f_d, self.f_sw, t, z_th, z_d, z_sw)
+        if z_d < self._crowd_lo:  # False for NaN
+            self._crowd_lo = z_d
+        if z_d > self._crowd_hi:
+            self._crowd_hi = z_d
         phases = self.phases
         prev = phases.phase
         if self.t0 != self.t0:  # NaN: the first sample
@@ -328,6 +340,7 @@ class Engine:
             self.batch.clear()
             self.invalid_updates = 0
             self.target_changed_t, self._target_ok = math.nan, True
+            self._crowd_lo, self._crowd_hi = math.inf, -math.inf
         elif prev == DIG:
             self.dig_end = t
         if ph == DUMP and self.rls is not None:
@@ -370,15 +383,21 @@ class Engine:
 
     def _finish_pass(self, t: float) -> list[Event]:
         rls = self._final_filter()
-        valid = rls.n >= self.cfg.min_samples and self._target_ok
+        travel = self._crowd_hi - self._crowd_lo  # -inf: no crowd at all
+        still = 0.0 <= travel < self.cfg.min_crowd_travel_m
+        valid = rls.n >= self.cfg.min_samples and self._target_ok and not still
         if not self._target_ok:
             at = self.target_changed_t - self.pass_start
             reason = f"the crowd laser changed target {at:.1f} s into the pass"
             self.target_changed_t, self._target_ok = math.nan, True
+        elif rls.n < self.cfg.min_samples:
+            reason = (f"only {n_of(rls.n, 'valid sample', 'valid samples')} in lift and "
+                      f"swing ({self.invalid_updates} invalid)")
+        elif still:
+            reason = (f"the crowd moved {travel:.2f} m in the pass: the laser sees something "
+                      "other than the handle, or is stuck")
         else:
-            reason = "" if valid else (
-                f"only {n_of(rls.n, 'valid sample', 'valid samples')} in lift and swing "
-                f"({self.invalid_updates} invalid)")
+            reason = ""
         pr = PassResult(self.pass_index, self.truck.index, self.pass_start, t, rls.payload_kg,
                         self._std(rls), rls.n, valid, reason)
         self.truck.passes.append(pr.as_dict())
