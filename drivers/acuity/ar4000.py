@@ -453,11 +453,19 @@ class Ar4000Driver(Driver):
         """Parse a chunk received at ``now``; hand readings to ``out``; count good lines.
 
         Every line completed by the chunk is stamped with the chunk's receive time
-        (taken right after the read, so a busy parser thread does not delay it).
+        (taken right after the read, so a busy parser thread does not delay it). The
+        handle's rule (:meth:`_takes`) times each line by when the device sent it: a
+        chunk of k lines took k samples to send, so the one n lines before its last was
+        sent n sample intervals before the chunk came, and never before the line before
+        it. A busy host reads a second of lines at once; timed by the chunk, the first of
+        them looked a second after the line before it, and far from it was within the
+        handle's reach (a stray taken, something else in the beam forgotten).
         """
         cfg = self.config
         good = 0
-        for line in self._splitter.feed(data):
+        lines = self._splitter.feed(data)
+        last = len(lines) - 1
+        for i, line in enumerate(lines):
             value = parse_line(line, cfg.unit_m)
             if value is None:
                 if line.strip():
@@ -469,15 +477,19 @@ class Ar4000Driver(Driver):
             good += 1
             self._malformed.add(False)
             self._garbage_since_good = 0
-            prev, self._prev = self._prev, (value, now)
+            prev = self._prev
+            sent = now - (last - i) * cfg.interval_s if i < last else now
+            if prev is not None and sent < prev[1]:
+                sent = prev[1]
+            self._prev = (value, sent)
             if value == NO_TARGET:
                 self.health.extra["no_target"] += 1
                 out(Reading(self.name, now, {}, frozenset({DISTANCE})))
             elif not 0.0 <= value <= cfg.max_plausible_m:
                 self.health.extra["implausible"] += 1
                 out(Reading(self.name, now, {}, frozenset({DISTANCE})))
-            elif self._takes(value, now, prev):
-                self._used, self._other = (value, now), None
+            elif self._takes(value, sent, prev):
+                self._used, self._other = (value, sent), None
                 self._jumped.add(False)
                 taken = self.health.extra["other_target"]
                 out(Reading(self.name, now, {DISTANCE: value, TARGETS_TAKEN: float(taken)}

@@ -121,9 +121,13 @@ class Ar4000SpanReader:
         # each a distance that follows from the line before it, while all before it are
         # (the driver's reference is then the line before: see Ar4000Driver._parse)
         arrive = np.searchsorted(ends, nl + 1, side="left")  # tick index of each line
-        t_line = tk[np.minimum(arrive, len(tk) - 1)]
         prev = d._prev
         assert prev is not None  # usable()
+        # when each line was sent, as the driver times it: its tick's time less an
+        # interval for each later line of that tick, never before the line before it
+        behind = np.searchsorted(arrive, arrive, side="right") - 1 - np.arange(len(arrive))
+        t_line = tk[np.minimum(arrive, len(tk) - 1)] - behind * cfg.interval_s
+        t_line = np.maximum.accumulate(np.concatenate([[prev[1]], t_line]))[1:]
         prev_v = np.concatenate([[prev[0]], vals[:-1]])[:len(vals)]
         prev_t = np.concatenate([[prev[1]], t_line[:-1]])[:len(vals)]
         used = ((vals > 0.0) & (vals <= cfg.max_plausible_m) & (

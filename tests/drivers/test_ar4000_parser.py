@@ -144,6 +144,35 @@ def test_a_distance_is_used_only_if_the_handle_could_have_moved_there() -> None:
     assert used[-1] is None and drv.health.extra["jumps"] == 168
 
 
+def test_something_in_the_beam_stays_refused_when_its_lines_come_in_bursts() -> None:
+    """A busy host reads the port late: ten lines at a time, 0.2 s apart, each stamped
+    with its chunk's time. The rule times each line by when it was sent (the chunk's
+    time, less a sample interval for each line after it), so something else in the beam
+    stays refused across the chunks until it has held for ``other_target_s``, and is
+    then counted as taken. (Until the twenty-eighth session the rule timed lines by
+    their chunk: each chunk's first line looked 0.2 s after the line before, the thing
+    was forgotten, and taken uncounted once the handle's reach had grown to it.)"""
+    drv = Ar4000Driver("laser", Ar4000Config(port="/dev/null", sample_interval_us=20000,
+                                             other_target_s=2.0))
+    used: list[float | None] = []
+
+    def chunk(mms: list[int], t: float) -> None:
+        out: list[Reading] = []
+        drv._parse(b"".join(f"{mm}\r\n".encode() for mm in mms), out.append, t)
+        assert len(out) == len(mms)
+        used.extend(r.values.get("distance_m") for r in out)
+
+    for k in range(10):  # the handle, line by line
+        chunk([4900 + k], 0.02 * k)
+    assert used[1:] == [pytest.approx(4.901 + 0.001 * k) for k in range(9)]
+    for k in range(12):  # something 1.9 m short of it, in chunks 0.2 s apart: its
+        chunk([3000 + i % 3 for i in range(10)], 0.4 + 0.2 * k)  # lines sent from 0.22 s
+    # refused for the 2 s after its first line was sent (100 lines), then taken, counted
+    assert used[10:110] == [None] * 100
+    assert used[111:] == [pytest.approx(3.0 + 0.001 * (j % 10 % 3)) for j in range(101, 120)]
+    assert drv.health.extra["other_target"] == 1
+
+
 @pytest.mark.parametrize(("step_mm", "catch_up"), [(50, (4, 7)), (58, (33, 37))])
 def test_a_corrupted_distance_used_does_not_lock_out_a_fast_handle(
         step_mm: int, catch_up: tuple[int, int]) -> None:

@@ -60,13 +60,15 @@ def test_something_that_stays_in_the_beam_for_a_second(
 def test_something_lodged_in_the_beam_after_a_pass(tmp_path: Path,
                                                    clean: dict[int, float]) -> None:
     """Something lodged in the beam 1 s after pass 1's dump, 1.5 m short of the handle,
-    to the end: the driver takes it as its target after ``other_target_s``, between
-    passes, and the laser reads it from then on. Passes 2 and 3 are not weighed, their
-    crowd having stood still; pass 1 is as in the clean capture."""
+    to the end: the driver takes it as its target after ``other_target_s`` (here as pass
+    2 begins), and the laser reads it from then on. Pass 2 is not weighed for the change
+    of target in it, pass 3 for a crowd that stood still; pass 1 is as in the clean
+    capture."""
     base = laser_strays.replay(laser_strays.CAPTURE)
     start = json.loads((laser_strays.CAPTURE / "manifest.json").read_text())["start_unix"]
     end1 = base["spans"][0][2] - start
     got = laser_strays.replay(laser_strays.stray_capture(tmp_path / "c", 0.0, 5, True,
                                                          lodged=(end1 + 1.0, -1500)))
     assert got["passes"] == [(1, clean[1]), (2, None), (3, None)]
-    assert all(why.startswith("the crowd moved 0.00 m") for why in got["reasons"].values())
+    assert got["reasons"][2].startswith("the crowd laser changed target")
+    assert got["reasons"][3].startswith("the crowd moved 0.00 m")
