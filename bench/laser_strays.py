@@ -110,6 +110,9 @@ def stray_capture(dst: Path, rate: float, seed: int, rule: bool,
 
 
 def replay(capture: Path) -> dict[str, Any]:
+    """The capture replayed fast through the daemon: its passes (payload, None if not
+    weighed), each pass's lift and swing in capture seconds (``spans``), the reasons of
+    those not weighed, and the laser's jumps."""
     from shoveld.daemon.config import parse_config
     from shoveld.model.params import load_params
     from shoveld.replay.service import fast_replay_service
@@ -129,15 +132,16 @@ def replay(capture: Path) -> dict[str, Any]:
             laser = svc.drivers["laser"].health.extra
         finally:
             rr.close()
+    start = json.loads((capture / "manifest.json").read_text())["start_unix"]
     return {"passes": [(m["pass"], m["payload_kg"] if m.get("valid") else None)
                        for m in passes],
-            "spans": [(m["pass"], m["end"] - m["samples"] * TICK_S, m["end"])
+            "spans": [(m["pass"], m["end"] - m["samples"] * TICK_S - start, m["end"] - start)
                       for m in passes],
             "reasons": {m["pass"]: m.get("reason", "") for m in passes if not m.get("valid")},
             "jumps": laser.get("jumps", 0)}
 
 
-def pass_blocks(spans: list[tuple[int, float, float]], start_unix: float, duration: float,
+def pass_blocks(spans: list[tuple[int, float, float]], duration: float,
                 rng: random.Random, only: set[int] | None = None) -> Blocks:
     """One block of ``duration`` s in each pass (or in the passes numbered in ``only``),
     its middle at a random time of the pass's lift and swing (where the payload is
@@ -146,7 +150,6 @@ def pass_blocks(spans: list[tuple[int, float, float]], start_unix: float, durati
     for no, a, b in spans:
         if only is not None and no not in only:
             continue
-        a, b = a - start_unix, b - start_unix
         t0 = rng.uniform(a, b) - duration / 2
         out.append((t0, t0 + duration, rng.choice((-1, 1)) * rng.randint(500, 3000)))
     return out
@@ -207,12 +210,11 @@ def run_blocks(durations: list[float], seeds: int, tmp: Path,
     ``durations``."""
     base = replay(CAPTURE)
     clean = dict(base["passes"])
-    start_unix = json.loads((CAPTURE / "manifest.json").read_text())["start_unix"]
     print_header(clean, "block", "; one block a pass" if only is None else
                  f"; one block in pass {', '.join(map(str, sorted(only)))}")
 
     def make(seed: int, dur: float, rule: bool) -> Path:
-        blocks = pass_blocks(base["spans"], start_unix, dur, random.Random(seed), only)
+        blocks = pass_blocks(base["spans"], dur, random.Random(seed), only)
         return stray_capture(tmp / f"b{dur}-{rule}-{seed}", 0.0, seed, rule, blocks, laser)
 
     for dur in durations:
@@ -225,9 +227,8 @@ def run_lodged(seeds: int, tmp: Path) -> None:
     """Something lodged in the beam in the return after pass 1, there to the end."""
     base = replay(CAPTURE)
     clean = dict(base["passes"])
-    start_unix = json.loads((CAPTURE / "manifest.json").read_text())["start_unix"]
     print_header(clean, "lodged", "; something lodged in the beam after pass 1's dump")
-    end1 = base["spans"][0][2] - start_unix
+    end1 = base["spans"][0][2]
 
     def make(seed: int, rule: bool) -> Path:
         rng = random.Random(seed)

@@ -478,7 +478,7 @@ class Ar4000Driver(Driver):
             self._malformed.add(False)
             self._garbage_since_good = 0
             prev = self._prev
-            sent = now - (last - i) * cfg.interval_s if i < last else now
+            sent = now - (last - i) * cfg.interval_s  # now itself for the chunk's last
             if prev is not None and sent < prev[1]:
                 sent = prev[1]
             self._prev = (value, sent)

@@ -213,14 +213,13 @@ class Engine:
         self.pass_start = math.nan
         self.dig_end = math.nan
         self.invalid_updates = 0
-        self.target_changed_t = math.nan
+        self.target_changed_t: float | None = None
         """When the crowd's laser changed target (:data:`CROWD_TARGET_CHANGED`) in the
         pass in progress, from its dig's start: it is not weighed, for its crowd is of
         two things. Between passes a change costs nothing: a bench block of 10-20 s in
         one pass left the passes on either side exact, where counting changes since the
         last dump lost the next pass in 10 of 10 runs (bench/laser_strays.py
         --in-passes 2)."""
-        self._target_ok = True
         self._crowd_lo, self._crowd_hi = math.inf, -math.inf
         """The pass's smallest and largest crowd so far (``min_crowd_travel_m``)."""
         self.truck = Truck(first_truck, self.cfg.truck_target_kg, list(truck_passes or []))
@@ -252,7 +251,7 @@ class Engine:
             z_d = math.nan if "crowd_m" in bad else s.crowd_m
             z_sw = math.nan if "swing_deg" in bad else s.swing_deg * _RAD
             if CROWD_TARGET_CHANGED in bad and self.rls is not None:
-                self.target_changed_t, self._target_ok = t, False
+                self.target_changed_t = t
         else:
             z_th, z_d, z_sw = s.handle_deg * _RAD, s.crowd_m, s.swing_deg * _RAD
         th, thd, thdd, d, dd, ddd, sw, swd, swdd = update_joints(
@@ -300,7 +299,7 @@ class Engine:
             if cached[0] != rls.n:  # the filter moves only when a block is applied
                 cached = self._cached = (rls.n, rls.payload_kg, self._std())
             est = LiveEstimate(t, PHASES[ph], cached[1], cached[2],
-                               (valid or not estimating) and self._target_ok)
+                               (valid or not estimating) and self.target_changed_t is None)
         else:
             est = LiveEstimate(t, PHASES[ph], math.nan, math.nan, False)
         self.last = est
@@ -339,7 +338,7 @@ class Engine:
             self._cached = (-1, math.nan, math.nan)
             self.batch.clear()
             self.invalid_updates = 0
-            self.target_changed_t, self._target_ok = math.nan, True
+            self.target_changed_t = None
             self._crowd_lo, self._crowd_hi = math.inf, -math.inf
         elif prev == DIG:
             self.dig_end = t
@@ -385,11 +384,12 @@ class Engine:
         rls = self._final_filter()
         travel = self._crowd_hi - self._crowd_lo  # -inf: no crowd at all
         still = 0.0 <= travel < self.cfg.min_crowd_travel_m
-        valid = rls.n >= self.cfg.min_samples and self._target_ok and not still
-        if not self._target_ok:
-            at = self.target_changed_t - self.pass_start
+        changed = self.target_changed_t
+        valid = rls.n >= self.cfg.min_samples and changed is None and not still
+        if changed is not None:
+            at = changed - self.pass_start
             reason = f"the crowd laser changed target {at:.1f} s into the pass"
-            self.target_changed_t, self._target_ok = math.nan, True
+            self.target_changed_t = None
         elif rls.n < self.cfg.min_samples:
             reason = (f"only {n_of(rls.n, 'valid sample', 'valid samples')} in lift and "
                       f"swing ({self.invalid_updates} invalid)")

@@ -7,6 +7,7 @@ silence)."""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -36,32 +37,32 @@ grows to them), and the handle's first line after them waits for the next to con
 it (the last distance used is by then too old to measure from alone)."""
 
 
-def _damage(stream: list[tuple[float, bytes]], t0: float, t1: float, babble: bool
-            ) -> list[tuple[float, bytes]]:
+def _replace(stream: list[tuple[float, bytes]], t0: float, t1: float,
+             new: Callable[[int], bytes | None]) -> list[tuple[float, bytes]]:
+    """The n-th line ending in [t0, t1) (from 1) replaced by ``new(n)``, where not None."""
     out, n = [], 0
     for t, data in stream:
         if t0 <= t < t1 and data.endswith(b"\n"):
             n += 1
-            new = b"#!\r\n" if babble and n % 2 else BAD_LINES.get(n)
-            if new is not None:
-                data = new
+            line = new(n)
+            if line is not None:
+                data = line
                 if out and not out[-1][1].endswith(b"\n"):  # the line's first bytes
                     out[-1] = (out[-1][0], b"")
         out.append((t, data))
     return out
 
 
+def _damage(stream: list[tuple[float, bytes]], t0: float, t1: float, babble: bool
+            ) -> list[tuple[float, bytes]]:
+    return _replace(stream, t0, t1,
+                    lambda n: b"#!\r\n" if babble and n % 2 else BAD_LINES.get(n))
+
+
 def _block(stream: list[tuple[float, bytes]], t0: float, t1: float, mm: int
            ) -> list[tuple[float, bytes]]:
     """Every line in [t0, t1) replaced by ``mm``: something that stays in the beam."""
-    out = []
-    for t, data in stream:
-        if t0 <= t < t1 and data.endswith(b"\n"):
-            data = f"{mm}\r\n".encode()
-            if out and not out[-1][1].endswith(b"\n"):  # the line's first bytes
-                out[-1] = (out[-1][0], b"")
-        out.append((t, data))
-    return out
+    return _replace(stream, t0, t1, lambda n: f"{mm}\r\n".encode())
 
 
 def _setup(edits: list[tuple[float, float, bool]], gap: tuple[float, float] | None = None,

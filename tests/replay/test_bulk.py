@@ -160,8 +160,7 @@ def test_a_laser_that_changes_target_is_marked_alike(tmp_path: Path) -> None:
     import laser_strays
 
     base = laser_strays.replay(laser_strays.CAPTURE)
-    start = json.loads((laser_strays.CAPTURE / "manifest.json").read_text())["start_unix"]
-    blocks = laser_strays.pass_blocks(base["spans"], start, 2.0, random.Random(7))
+    blocks = laser_strays.pass_blocks(base["spans"], 2.0, random.Random(7))
     capture = laser_strays.stray_capture(tmp_path / "c", 0.0, 7, True, blocks,
                                          {"other_target_s": 0.5})
     stepped = _replay(capture, tmp_path, bulk=False)
