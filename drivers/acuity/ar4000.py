@@ -349,8 +349,8 @@ class Ar4000Driver(Driver):
     The protocol has no checksum; what stops a corrupted digit is the handle's speed. A
     distance is used only if it can follow from the last distance used, no further from
     it than the handle moves in the time between them (``max_speed_mps``, plus
-    ``jump_noise_m``), no-target lines in between or not. After a connection there is
-    no such distance, and after :data:`REFERENCE_LINES` sample intervals with none used
+    ``jump_noise_m``), no-target lines in between or not. Before the first distance
+    there is none, and after :data:`REFERENCE_LINES` sample intervals with none used
     the one there is allows much: a distance must then also follow in the same way from
     the well-formed line just before it (so the first after a start or a long no-target
     stretch is reported invalid). Something else that stays in the beam (a line out of
@@ -358,7 +358,8 @@ class Ar4000Driver(Driver):
     sample's reach of the one before) stays a jump when the handle's reach grows to it,
     until it has held for ``other_target_s`` (then it is taken as the target, counted in
     ``extra["other_target"]``, and every later distance carries that count as
-    :data:`TARGETS_TAKEN`).
+    :data:`TARGETS_TAKEN`). A reconnect keeps the last distance used: the handle moves
+    no faster while the port is down.
 
     Health: ``bad_frames`` counts malformed lines, ``rejected_bytes`` their bytes,
     ``timeouts`` silent periods; ``extra`` carries ``no_target`` (zero readings),
@@ -414,7 +415,11 @@ class Ar4000Driver(Driver):
             raise DeviceError(f"cannot open AR4000 port {cfg.port}: {e}") from e
         self._splitter.clear()
         self._pending.clear()
-        self._prev = self._used = self._other = None  # a new connection: nothing to follow
+        # A new connection: the lines before it are not the line before the next one,
+        # but the last distance used still bounds where the handle can be (its reach
+        # grows with the gap), so something else in the beam after a reconnect is
+        # refused and counted like one that comes while connected.
+        self._prev = self._other = None
         if cfg.configure:
             for cmd in cfg.commands():
                 self._ser.write(cmd)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from drivers.acuity import Ar4000Config, Ar4000Driver
-from drivers.base import DeviceError
+from drivers.base import TARGETS_TAKEN, DeviceError
 from hil_fixtures.ar4000 import Ar4000Emulator, source_from_table
 from hil_fixtures.virtual_shovel import DriverRunner
 from shoveld.installation import Installation
@@ -131,6 +131,40 @@ def test_something_that_stays_in_the_beam_is_refused_for_other_target_s(
         else:  # taken after 0.3 s: then the handle is what is refused, for as long
             assert h.extra["other_target"] == 2
             assert any(d == pytest.approx(2.0, abs=5e-4) for d in distances(run))
+
+
+@pytest.mark.parametrize("after_m", [4.35, 0.5])
+def test_a_reconnect_keeps_the_handles_reach(after_m: float) -> None:
+    """The port goes silent (a cable, a power blip) and comes back. The handle, a few
+    centimetres on, is used again at once; something 3.8 m in front of it, further than
+    the handle can have moved in the gap, is refused for ``other_target_s`` and then
+    counted as taken (the loop then marks the tick, and a pass across it is not
+    weighed). Until the twenty-ninth session a reconnect forgot the last distance used,
+    and the first two lines that agreed were taken, whatever they were, uncounted."""
+    where = [4.321]
+    with Ar4000Emulator(lambda t: where[0]) as emu, DriverRunner(
+            driver_for(emu, other_target_s=0.5)) as run:
+        h = run.driver.health
+        assert run.wait_for(lambda: len(distances(run)) >= 5, 5)
+        emu.silent = True
+        assert run.wait_for(lambda: not h.connected, 3)
+        where[0] = after_m
+        n = len(run.readings)
+        emu.silent = False
+        assert run.wait_for(lambda: h.connected and len(run.readings) > n + 100, 10)
+        after = run.readings[n:]
+        used = [r.values.get("distance_m") for r in after]
+        assert h.reconnects >= 1
+        if after_m > 1.0:  # the handle: in reach, used from the second line on
+            assert all(d == pytest.approx(after_m, abs=5e-4) for d in used[1:])
+            assert h.extra["other_target"] == 0
+            assert all(TARGETS_TAKEN not in r.values for r in run.readings)
+        else:  # refused for 0.5 s (50 lines at 100 Hz), then taken and counted
+            first = next(i for i, d in enumerate(used) if d is not None)
+            assert 45 <= first <= 60
+            assert all(d == pytest.approx(after_m, abs=5e-4) for d in used[first:])
+            assert h.extra["other_target"] == 1
+            assert after[first].values[TARGETS_TAKEN] == 1.0
 
 
 def test_only_garbage_is_treated_like_silence() -> None:
