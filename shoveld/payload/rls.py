@@ -148,6 +148,13 @@ class PayloadRls:
         return math.sqrt(max(uu - 2.0 * m * uc + m * m * cc, 0.0)) / info if info else math.nan
 
     @property
+    def misfit(self) -> float:
+        """The pass's mean normalised innovation squared per degree of freedom: about 1
+        when the residuals are the noise model's size, far above when the model does not
+        hold (``bench/pass_misfit.py`` measures it; the engine does not act on it)."""
+        return self._nis_sum / self._nis_dof if self._nis_dof else math.nan
+
+    @property
     def payload_kg(self) -> float:
         return float(self.x) if self.n else math.nan
 

@@ -189,6 +189,24 @@ def test_payload_rls_matches_filterpy(forgetting: float) -> None:
     assert rls._nis_sum == pytest.approx(nis, rel=1e-8)
 
 
+def test_payload_rls_misfit_is_one_when_the_noise_model_holds() -> None:
+    """``misfit`` (filterpy's innovation statistic per degree of freedom, which the test
+    above checks) is about 1 on data with the noise the filter was given, and about
+    k**2 when the residuals are k times that size (``bench/pass_misfit.py``)."""
+    rng = np.random.default_rng(5)
+    noise = (3.0, 2.0)
+    fits = {}
+    for k in (1.0, 4.0):
+        rls = PayloadRls(noise, 0.01)
+        assert math.isnan(rls.misfit)
+        for _ in range(200):
+            a = rng.uniform(0.01, 0.05, (10, 2))
+            rls.update(a, a * 21000.0 + k * rng.normal(0, 1, (10, 2)) * noise)
+        fits[k] = rls.misfit
+    assert fits[1.0] == pytest.approx(1.0, abs=0.1)
+    assert fits[4.0] == pytest.approx(16.0, rel=0.1)
+
+
 def test_the_daemon_and_the_engine_start_without_scipy_or_filterpy() -> None:
     code = ("import sys, numpy as np, shoveld.daemon.service, shoveld.engine.loop, "
             "shoveld.engine.offline;"
