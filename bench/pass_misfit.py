@@ -12,9 +12,9 @@ from the filter the engine reports. Three sets of passes:
   payload against the clean capture's, and its misfit;
 * ``--machines N``: the realistic and the ideal simulated machines of
   ``bench/payload_accuracy.py`` (seeds 1..N, 60 passes each): the misfit's spread;
-* ``--effects``: each simulated hidden effect alone at the top of its typical range on
-  ``bench/diagnose_matrix.py``'s machines (seeds 1, 2; 24 passes), the base model
-  calibrated on the effect's own trials: the misfit's median and largest.
+* ``--effects``: each simulated hidden effect alone at the bottom and the top of its
+  typical range on ``bench/diagnose_matrix.py``'s machines (seeds 1, 2; 24 passes), the
+  base model calibrated on the effect's own trials: the misfit's median and spread.
 
     .venv/bin/python bench/pass_misfit.py [--handle] [--seeds 8] [--machines 18] [--effects]
 """
@@ -103,17 +103,17 @@ def run_effects() -> None:
     from shoveld.identify.calibrate import Calibrator
     from shoveld.sim.effects import SIM_EFFECTS
 
-    print("each hidden effect alone at the top of its typical range, base model, "
-          "seeds 1-2, 24 passes each")
+    print("each hidden effect alone at the bottom and the top of its typical range, base "
+          "model, seeds 1-2, 24 passes each")
     for name in sorted(SIM_EFFECTS):
-        hi = SIM_EFFECTS[name].typical_range[1]
-        every: list[float] = []
-        for seed in (1, 2):
-            calib, measured, _ = simulate({name: hi}, seed, 24)
-            MISFITS.clear()
-            estimate_table(measured[0], Calibrator(method="output").fit(calib).params_)
-            every.extend(MISFITS)
-        print(f"  {name:24s} {hi:8.3f}  {spread(every)}")
+        for size in SIM_EFFECTS[name].typical_range:
+            every: list[float] = []
+            for seed in (1, 2):
+                calib, measured, _ = simulate({name: size}, seed, 24)
+                MISFITS.clear()
+                estimate_table(measured[0], Calibrator(method="output").fit(calib).params_)
+                every.extend(MISFITS)
+            print(f"  {name:24s} {size:8.3f}  {spread(every)}")
 
 
 def main() -> None:
