@@ -26,6 +26,11 @@ a pass across which, from its dig's start to its dump, the laser changed target)
     .venv/bin/python bench/laser_strays.py --blocks 0.1,0.3,1,3,10 [--seeds 10]
         [--other-target-s 2] [--in-passes 2]
     .venv/bin/python bench/laser_strays.py --lodged [--seeds 10]
+    .venv/bin/python bench/laser_strays.py --outages 0.3,1,2,5 [--seeds 10]
+
+``--outages`` cuts the laser's stream in pass 2's lift and swing (the driver goes silent
+after ``silent_timeout_s`` and reconnects) and puts something on the handle, moving with
+it, from the cut to the end: the pass of the outage and the next are at stake.
 """
 
 from __future__ import annotations
@@ -57,11 +62,14 @@ in mm."""
 
 def stray_capture(dst: Path, rate: float, seed: int, rule: bool,
                   blocks: Blocks | None = None, laser: dict[str, Any] | None = None,
-                  lodged: tuple[float, int] | None = None) -> Path:
+                  lodged: tuple[float, int] | None = None,
+                  outage: tuple[float, float] | None = None) -> Path:
     """A copy of the capture with stray returns in the laser's lines, and lines inside
     ``blocks`` off by the block's offset (and the rule off in its laser config if not
     ``rule``); with ``lodged`` (from, offset in mm), every line from then on reads one
-    distance, the handle's then plus the offset: something lodged in the beam."""
+    distance, the handle's then plus the offset: something lodged in the beam; with
+    ``outage`` (from, to), nothing the laser sent in between reaches the host (a cable
+    pulled, the device's power lost: the driver goes silent and reconnects)."""
     shutil.copytree(CAPTURE, dst)
     rng = random.Random(seed)
     src = (CAPTURE / "laser.serial.jsonl").read_text().splitlines()
@@ -71,6 +79,8 @@ def stray_capture(dst: Path, rate: float, seed: int, rule: bool,
         rec = json.loads(text)
         if rec["d"] != "rx":
             out.append(text)
+            continue
+        if outage is not None and outage[0] <= rec["t"] < outage[1]:
             continue
         line.append(rec)
         data = bytes.fromhex(rec["hex"])
@@ -239,6 +249,27 @@ def run_lodged(seeds: int, tmp: Path) -> None:
         print_row(f"{'':>6s}", rule, clean, seeds, lambda seed, rule=rule: make(seed, rule))
 
 
+def run_outages(gaps: list[float], seeds: int, tmp: Path) -> None:
+    """The laser's stream cut for ``gap`` seconds in pass 2's lift and swing, and
+    something on the handle (moving with it, 0.5-3 m off the target) in the beam from
+    the cut to the end: it came while the port was down."""
+    base = replay(CAPTURE)
+    clean = dict(base["passes"])
+    print_header(clean, "outage", "; an outage in pass 2, something on the handle after it")
+    _, a, b = base["spans"][1]
+    end = base["spans"][-1][2] + 100.0
+
+    def make(seed: int, gap: float) -> Path:
+        rng = random.Random(seed)
+        t0 = rng.uniform(a, max(a, b - gap))
+        off = rng.choice((-1, 1)) * rng.randint(500, 3000)
+        return stray_capture(tmp / f"o{gap}-{seed}", 0.0, seed, True,
+                             blocks=[(t0, end, off)], outage=(t0, t0 + gap))
+
+    for gap in gaps:
+        print_row(f"{gap:5.1f}s", True, clean, seeds, lambda seed, gap=gap: make(seed, gap))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--rates", default="0.005,0.02,0.05")
@@ -253,10 +284,15 @@ def main() -> None:
     ap.add_argument("--in-passes", default="", metavar="N,N,...",
                     help="--blocks only in these passes (default: every pass), to see "
                          "what a block costs the passes around it")
+    ap.add_argument("--outages", default="", metavar="S,S,...",
+                    help="the laser's stream cut for each of these times (seconds) in "
+                         "pass 2, something on the handle after it")
     args = ap.parse_args()
     logging.disable(logging.WARNING)
     with tempfile.TemporaryDirectory() as tmp:
-        if args.lodged:
+        if args.outages:
+            run_outages([float(x) for x in args.outages.split(",")], args.seeds, Path(tmp))
+        elif args.lodged:
             run_lodged(args.seeds, Path(tmp))
         elif args.blocks:
             run_blocks([float(x) for x in args.blocks.split(",")], args.seeds, Path(tmp),

@@ -416,9 +416,10 @@ class Ar4000Driver(Driver):
         self._splitter.clear()
         self._pending.clear()
         # A new connection: the lines before it are not the line before the next one,
-        # but the last distance used still bounds where the handle can be (its reach
-        # grows with the gap), so something else in the beam after a reconnect is
-        # refused and counted like one that comes while connected.
+        # but the last distance used still bounds where the handle can be, so something
+        # else in the beam beyond the handle's reach over the gap is refused and counted
+        # like one that comes while connected (after the default 1 s of silence that
+        # reach is 3 m: docs/drivers-ar4000.md, "A reconnect keeps the handle's reach").
         self._prev = self._other = None
         if cfg.configure:
             for cmd in cfg.commands():

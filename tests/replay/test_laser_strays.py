@@ -75,3 +75,23 @@ def test_something_lodged_in_the_beam_after_a_pass(tmp_path: Path, base: dict[st
     assert got["passes"] == [(1, clean[1]), (2, None), (3, None)]
     assert got["reasons"][2].startswith("the crowd laser changed target")
     assert got["reasons"][3].startswith("the crowd moved 0.00 m")
+
+
+@pytest.mark.xfail(strict=True, reason="not caught: after a reconnect's second of silence the "
+                   "handle's reach (3 m/s) covers the thing, which is taken uncounted "
+                   "(docs/drivers-ar4000.md, 'A reconnect keeps the handle's reach')")
+def test_something_that_comes_into_the_beam_while_the_laser_is_down(
+        tmp_path: Path, base: dict[str, Any], clean: dict[int, float]) -> None:
+    """The laser's stream cut for 2 s in pass 2's lift and swing (the driver goes silent
+    and reconnects), and something on the handle, 1.5 m short of its target and moving
+    with it, from the cut to the end. A meter that cannot tell the thing from the handle
+    should not weigh passes 2 and 3 on it: each is either not weighed or within 1 % of
+    the clean capture's. Today both are weighed tonnes off (``--outages`` in the bench)."""
+    _, a, b = base["spans"][1]
+    end = base["spans"][-1][2] + 100.0
+    t0 = a + 0.5
+    got = laser_strays.replay(laser_strays.stray_capture(
+        tmp_path / "c", 0.0, 6, True, blocks=[(t0, end, -1500)], outage=(t0, t0 + 2.0)))
+    assert dict(got["passes"])[1] == clean[1]
+    for no, kg in got["passes"][1:]:
+        assert kg is None or abs(kg - clean[no]) < 0.01 * clean[no], (no, kg, clean[no])
