@@ -215,11 +215,11 @@ class Engine:
         self.invalid_updates = 0
         self.target_changed_t: float | None = None
         """When the crowd's laser changed target (:data:`CROWD_TARGET_CHANGED`) in the
-        pass in progress, from its dig's start: it is not weighed, for its crowd is of
-        two things. Between passes a change costs nothing: a bench block of 10-20 s in
-        one pass left the passes on either side exact, where counting changes since the
-        last dump lost the next pass in 10 of 10 runs (bench/laser_strays.py
-        --in-passes 2)."""
+        pass in progress, from its dig's start (set and read only while there is one;
+        cleared at the next dig): it is not weighed, for its crowd is of two things.
+        Between passes a change costs nothing: a bench block of 10-20 s in one pass left
+        the passes on either side exact, where counting changes since the last dump lost
+        the next pass in 10 of 10 runs (bench/laser_strays.py --in-passes 2)."""
         self._crowd_lo, self._crowd_hi = math.inf, -math.inf
         """The pass's smallest and largest crowd so far (``min_crowd_travel_m``)."""
         self.truck = Truck(first_truck, self.cfg.truck_target_kg, list(truck_passes or []))
@@ -389,7 +389,6 @@ class Engine:
         if changed is not None:
             at = changed - self.pass_start
             reason = f"the crowd laser changed target {at:.1f} s into the pass"
-            self.target_changed_t = None
         elif rls.n < self.cfg.min_samples:
             reason = (f"only {n_of(rls.n, 'valid sample', 'valid samples')} in lift and "
                       f"swing ({self.invalid_updates} invalid)")
