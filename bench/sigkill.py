@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import random
 import re
@@ -68,8 +69,16 @@ class Run:
         self.passes: list[dict[str, Any]] = []
         self.events: list[tuple[float, str]] = []
         self.err = ""
+        self.ended = math.nan
+        """When ``finish`` saw the process gone (the reference run's end: it waits at once)."""
+        self._err_parts: list[str] = []
+        # stdout and stderr each read by a thread to the end: ``communicate`` would read
+        # stdout too, racing the event reader for a fast run's lines (the reference run
+        # then had no passes, one run in a few)
         self._out = threading.Thread(target=self._read, daemon=True)
+        self._err = threading.Thread(target=self._read_err, daemon=True)
         self._out.start()
+        self._err.start()
 
     def _read(self) -> None:
         assert self.proc.stdout is not None
@@ -81,6 +90,10 @@ class Run:
             self.events.append((time.monotonic(), str(msg.get("topic"))))
             if msg.get("topic") == "pass":
                 self.passes.append(msg)
+
+    def _read_err(self) -> None:
+        assert self.proc.stderr is not None
+        self._err_parts.append(self.proc.stderr.read())
 
     def wait_passes(self, n: int, timeout: float) -> bool:
         end = time.monotonic() + timeout
@@ -98,8 +111,11 @@ class Run:
         return alive
 
     def finish(self, timeout: float = 120.0) -> int:
-        _, self.err = self.proc.communicate(timeout=timeout)
+        self.proc.wait(timeout=timeout)
+        self.ended = time.monotonic()
         self._out.join(5.0)
+        self._err.join(5.0)
+        self.err = "".join(self._err_parts)
         return int(self.proc.returncode)
 
 
@@ -135,6 +151,11 @@ def main() -> None:
         assert ref.finish() == 0, ref.err
         first = next(t for t, topic in ref.events if topic == "pass") - ref.t0
         run_s = ref.events[-1][0] - ref.t0
+        last_pass = max(t for t, topic in ref.events if topic == "pass")
+        # from the last pass reported to the process's end: the last truck closed, the
+        # service stopped (about 20 ms since the replay got fast: a fixed 0.3 s window
+        # let every shut-down kill find the process already gone)
+        shutdown_s = ref.ended - last_pass
         n_capture = len(ref.passes)
         state = Path(tmp) / "state"
         t_start = time.monotonic()
@@ -152,7 +173,7 @@ def main() -> None:
                 time.sleep(rng.uniform(0.0, 0.005))
             elif kind == "shut-down":
                 r.wait_passes(n_capture, 60.0)
-                time.sleep(rng.uniform(0.0, 0.3))
+                time.sleep(rng.uniform(0.0, shutdown_s))
             killed = r.kill() if not last else False
             code = r.finish()
             if last and code != 0:
@@ -180,7 +201,9 @@ def main() -> None:
                 faults["restored the wrong next pass"] += 1
         elapsed = time.monotonic() - t_start
     print(f"kills: {sum(kinds.values())} in {elapsed:.0f} s ("
-          + ", ".join(f"{k} {kinds[k]}" for k in KINDS) + ")")
+          + ", ".join(f"{k} {kinds[k]}" for k in KINDS) + "); the reference run: first "
+          f"pass at {first:.2f} s, last event at {run_s:.2f} s, shut-down "
+          f"{1e3 * shutdown_s:.0f} ms")
     if missed:
         print("  runs that ended before their kill: "
               + ", ".join(f"{k} {v}" for k, v in missed.items()))
