@@ -11,7 +11,10 @@ replays it fast through the daemon's own code (``fast_replay_service``: the driv
 the loop, the estimator), with the driver's rule (the default) and without it
 (``max_speed_mps = 1e9`` in the capture's laser config). Each pass is compared with
 the clean capture's: the pass error in kilograms of the passes weighed, the passes
-published not weighed, and the passes lost (the capture has three).
+published not weighed, and the passes lost (the capture has three); and of the passes
+weighed more than a tonne off, and of those within a tonne, how many the daemon warned
+of for their misfit (above ``engine.misfit_warn``: weighed all the same, but not
+silently).
 
 ``--blocks`` puts something in the beam that stays: in each pass, once, for a given
 time (a rope swinging through, a dust cloud that hangs), every line is a return 0.5-3
@@ -148,6 +151,7 @@ def replay(capture: Path) -> dict[str, Any]:
             "spans": [(m["pass"], m["end"] - m["samples"] * TICK_S - start, m["end"] - start)
                       for m in passes],
             "reasons": {m["pass"]: m.get("reason", "") for m in passes if not m.get("valid")},
+            "misfits": {m["pass"]: m.get("misfit") for m in passes},
             "jumps": laser.get("jumps", 0)}
 
 
@@ -176,16 +180,20 @@ def summary(errs: list[float]) -> tuple[float, float, float]:
 def print_header(clean: dict[int, float], first: str, note: str = "") -> None:
     print(f"clean capture: passes {[round(v, 1) for v in clean.values()]} kg{note}")
     print(f"{first:>6s} {'rule':>4s} {'weighed':>7s} {'not':>4s} {'lost':>5s} "
-          f"{'|err| median':>13s} {'p90':>8s} {'max':>8s} {'jumps/run':>10s}")
+          f"{'|err| median':>13s} {'p90':>8s} {'max':>8s} {'jumps/run':>10s} "
+          f"{'misfit warned: >1 t off':>24s} {'<=1 t off':>10s}")
 
 
 def print_row(label: str, rule: bool, clean: dict[int, float], seeds: int,
               make: Callable[[int], Path]) -> None:
     """One row of the table: the capture ``make(seed)`` gives for each seed, replayed,
     its passes against the clean capture's: the errors of those weighed, and how many
-    were published not weighed ("not") and not published at all ("lost")."""
+    were published not weighed ("not") and not published at all ("lost"); and of those
+    weighed more than a tonne off, how many the daemon warned of for their misfit."""
+    from shoveld.payload.misfit import misfit_high
+
     errs: list[float] = []
-    not_weighed = lost = jumps = 0
+    not_weighed = lost = jumps = off = warned = near_warned = 0
     for seed in range(1, seeds + 1):
         cap = make(seed)
         got = replay(cap)
@@ -198,10 +206,18 @@ def print_row(label: str, rule: bool, clean: dict[int, float], seeds: int,
                 not_weighed += 1
             else:
                 errs.append(abs(have[no] - kg))
+                high = misfit_high(got["misfits"][no])
+                if errs[-1] > 1000.0:
+                    off += 1
+                    warned += high
+                else:
+                    near_warned += high
         shutil.rmtree(cap)
     med, p90, top = summary(errs)
     print(f"{label} {'on' if rule else 'off':>4s} {len(errs):7d} {not_weighed:4d} {lost:5d} "
-          f"{med:10.1f} kg {p90:5.0f} kg {top:5.0f} kg {jumps / seeds:10.1f}", flush=True)
+          f"{med:10.1f} kg {p90:5.0f} kg {top:5.0f} kg {jumps / seeds:10.1f} "
+          f"{f'{warned} of {off}':>24s} {f'{near_warned} of {len(errs) - off}':>10s}",
+          flush=True)
 
 
 def run_rates(rates: list[float], seeds: int, tmp: Path) -> None:

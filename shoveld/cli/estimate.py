@@ -8,6 +8,7 @@ import sys
 
 from shoveld.cli import CliError
 from shoveld.cli.common import read_params, read_tables
+from shoveld.payload.misfit import misfit_note
 from shoveld.words import n_of
 
 
@@ -62,10 +63,12 @@ def run(args: argparse.Namespace) -> int:
                 print(json.dumps(d))
             elif p.valid:
                 print(f"pass {p.index:3d}  truck {p.truck:3d}  {p.start_s:9.1f}-{p.end_s:9.1f} s"
-                      f"  {p.payload_kg:9.0f} kg +- {p.std_kg:5.0f} kg  ({table.source})")
+                      f"  {p.payload_kg:9.0f} kg +- {p.std_kg:5.0f} kg  ({table.source})"
+                      f"{misfit_note(d['misfit'], cfg.misfit_warn)}")
             else:
                 print(f"pass {p.index:3d}  truck {p.truck:3d}  {p.start_s:9.1f}-{p.end_s:9.1f} s"
-                      f"  INVALID: {p.reason}  ({table.source})")
+                      f"  INVALID: {p.reason}  ({table.source})"
+                      f"{misfit_note(d['misfit'], cfg.misfit_warn)}")
         if est.passes:
             next_pass = est.passes[-1].index + 1
         if est.trucks:

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from shoveld.cli import CliError
+from shoveld.payload.misfit import misfit_note
 from shoveld.words import n_of
 
 
@@ -126,12 +127,13 @@ def run(args: argparse.Namespace) -> int:
     if args.csv:
         w = csv.writer(sys.stdout, lineterminator="\n")
         w.writerow(["pass", "truck", "shovel", "start", "end", "payload_kg", "std_kg",
-                    "samples", "valid", "reason"])
+                    "samples", "valid", "reason", "misfit"])
         for r in rows:
             w.writerow([r["pass"], r["truck"], r["shovel"], iso(r["start"]), iso(r["end"]),
                         "" if r["payload_kg"] is None else f"{r['payload_kg']:.1f}",
                         "" if r["std_kg"] is None else f"{r['std_kg']:.1f}",
-                        r["samples"], int(r["valid"]), r["reason"]])
+                        r["samples"], int(r["valid"]), r["reason"],
+                        "" if r["misfit"] is None else f"{r['misfit']:.2f}"])
         return 0
     if not rows:
         print(f"no passes in {path}" + (f" since {iso(since)}" if since else ""))
@@ -140,7 +142,7 @@ def run(args: argparse.Namespace) -> int:
         val = (f"{r['payload_kg']:9.0f} kg +- {r['std_kg']:5.0f} kg" if r["valid"]
                else f"INVALID: {r['reason']}")
         print(f"pass {r['pass']:5d}  truck {r['truck']:4d}  {iso(r['start'])} .. "
-              f"{iso(r['end'])[11:]}  {val}")
+              f"{iso(r['end'])[11:]}  {val}{misfit_note(r['misfit'])}")
     trucks: dict[int, Truck] = {}
     closed: dict[int, bool] = {}
     for r in rows:

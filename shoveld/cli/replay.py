@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 
 from shoveld.cli import CliError
 from shoveld.endpoints import endpoint_arg
+from shoveld.payload.misfit import misfit_note
 from shoveld.words import n_of
 
 if TYPE_CHECKING:
@@ -161,7 +162,9 @@ def run(args: argparse.Namespace) -> int:
             elif kind == "pass":
                 val = (f"{msg['payload_kg']:9.0f} kg +- {msg['std_kg']:5.0f} kg"
                        if msg["valid"] else f"INVALID: {msg['reason']}")
-                print(f"pass {msg['pass']:4d}  truck {msg['truck']:3d}  {val}", flush=True)
+                m = msg.get("misfit")
+                note = misfit_note(m if isinstance(m, float) else None, cfg.engine.misfit_warn)
+                print(f"pass {msg['pass']:4d}  truck {msg['truck']:3d}  {val}{note}", flush=True)
             elif msg.get("closed"):
                 print(f"truck {msg['truck']:3d} closed: {n_of(msg['passes'], 'pass', 'passes')}, "
                       f"{msg['total_kg']:.0f} kg of {msg['target_kg']:.0f} kg "

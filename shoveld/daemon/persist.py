@@ -19,7 +19,9 @@ from typing import Any
 
 log = logging.getLogger(__name__)
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+"""2 (2026-11-29): the passes' ``misfit``; a version-1 log gains the column when the
+daemon opens it (its passes keep NULL there), in one transaction."""
 DB_NAME = "passes.sqlite"
 
 _SCHEMA = """
@@ -37,7 +39,8 @@ CREATE TABLE IF NOT EXISTS passes (
     samples INTEGER NOT NULL,
     valid INTEGER NOT NULL,
     reason TEXT NOT NULL DEFAULT '',
-    written_unix REAL NOT NULL
+    written_unix REAL NOT NULL,
+    misfit REAL
 );
 CREATE INDEX IF NOT EXISTS passes_end ON passes(end_unix);
 CREATE TABLE IF NOT EXISTS trucks (
@@ -112,14 +115,23 @@ def connect(path: str | Path, readonly: bool = False, durable: bool = True
     con.executescript("BEGIN;" + _SCHEMA + "COMMIT;")  # all tables or none, even if killed
     con.execute("INSERT OR IGNORE INTO meta(key, value) VALUES ('schema', ?)",
                 (str(SCHEMA_VERSION),))
+    if not _has_misfit(con):  # a version-1 log: the column and the version, or neither
+        con.executescript("BEGIN IMMEDIATE; ALTER TABLE passes ADD COLUMN misfit REAL; "
+                          f"UPDATE meta SET value = '{SCHEMA_VERSION}' WHERE key = 'schema'; "
+                          "COMMIT;")
     return con
 
 
+def _has_misfit(con: sqlite3.Connection) -> bool:
+    """Whether the pass log's passes have the ``misfit`` column (schema 2)."""
+    return any(r[1] == "misfit" for r in con.execute("PRAGMA table_info(passes)"))
+
+
 def _row_to_pass(row: sqlite3.Row | tuple[Any, ...]) -> dict[str, Any]:
-    (pass_, truck, start_s, end_s, payload, std, samples, valid, reason) = row
+    (pass_, truck, start_s, end_s, payload, std, samples, valid, reason, misfit) = row
     return {"pass": pass_, "truck": truck, "start_s": start_s, "end_s": end_s,
             "payload_kg": payload, "std_kg": std, "samples": samples, "valid": bool(valid),
-            "reason": reason}
+            "reason": reason, "misfit": misfit}
 
 
 class PassLog:
@@ -149,7 +161,7 @@ class PassLog:
         if row is not None and row[0] == max_truck:
             r.truck = row[0]
             rows = c.execute("SELECT pass, truck, start_s, end_s, payload_kg, std_kg, samples, "
-                             "valid, reason FROM passes WHERE truck = ? ORDER BY pass",
+                             "valid, reason, misfit FROM passes WHERE truck = ? ORDER BY pass",
                              (r.truck,)).fetchall()
             r.truck_passes = [_row_to_pass(x) for x in rows]
         else:
@@ -173,11 +185,11 @@ class PassLog:
             c.execute("INSERT OR IGNORE INTO trucks(truck, target_kg, opened_unix) "
                       "VALUES (?, ?, ?)", (p["truck"], target_kg, start_unix))
             c.execute("INSERT INTO passes(pass, truck, shovel, start_unix, end_unix, start_s, "
-                      "end_s, payload_kg, std_kg, samples, valid, reason, written_unix) "
-                      "VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?)",
+                      "end_s, payload_kg, std_kg, samples, valid, reason, written_unix, "
+                      "misfit) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
                       (p["pass"], p["truck"], self.shovel, start_unix, end_unix, p["start_s"],
                        p["end_s"], p["payload_kg"], p["std_kg"], p["samples"],
-                       int(bool(p["valid"])), p.get("reason", ""), now))
+                       int(bool(p["valid"])), p.get("reason", ""), now, p.get("misfit")))
             if boot_stamp is not None:
                 c.execute("INSERT OR REPLACE INTO meta(key, value) VALUES ('last_dump_boot', ?)",
                           (boot_stamp,))
@@ -220,7 +232,7 @@ class PassLog:
 
 
 PASS_COLUMNS = ("pass", "truck", "shovel", "start", "end", "payload_kg", "std_kg", "samples",
-                "valid", "reason")
+                "valid", "reason", "misfit")
 
 
 def read_passes(path: str | Path, since_unix: float | None = None,
@@ -228,8 +240,11 @@ def read_passes(path: str | Path, since_unix: float | None = None,
     """Passes that ended in [since, until), oldest first (for shift reports)."""
     con = connect(path, readonly=True)
     try:
+        # a version-1 log that no daemon of schema 2 has opened yet: no misfit there
+        misfit = "misfit" if _has_misfit(con) else "NULL"
         q = ("SELECT pass, truck, shovel, start_unix, end_unix, payload_kg, std_kg, samples, "
-             "valid, reason FROM passes WHERE end_unix >= ? AND end_unix < ? ORDER BY pass")
+             f"valid, reason, {misfit} FROM passes WHERE end_unix >= ? AND end_unix < ? "
+             "ORDER BY pass")
         rows = con.execute(q, (since_unix if since_unix is not None else -1e18,
                                until_unix if until_unix is not None else 1e18)).fetchall()
         trucks = {int(t): (target, closed) for t, target, closed in con.execute(

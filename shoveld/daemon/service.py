@@ -461,13 +461,14 @@ class Service:
     def _pass_msg(p: dict[str, Any], start_u: float, end_u: float) -> dict[str, Any]:
         return {"pass": p["pass"], "truck": p["truck"], "payload_kg": p["payload_kg"],
                 "std_kg": p["std_kg"], "start": round(start_u, 3), "end": round(end_u, 3),
-                "valid": bool(p["valid"]), "samples": p["samples"], "reason": p["reason"]}
+                "valid": bool(p["valid"]), "samples": p["samples"], "reason": p["reason"],
+                "misfit": p.get("misfit")}
 
     @staticmethod
     def _pass_msg_from_engine(p: dict[str, Any]) -> dict[str, Any]:
         return {"pass": p["pass"], "truck": p["truck"], "payload_kg": p["payload_kg"],
                 "std_kg": p["std_kg"], "valid": bool(p["valid"]), "samples": p["samples"],
-                "reason": p.get("reason", "")}
+                "reason": p.get("reason", ""), "misfit": p.get("misfit")}
 
     def _truck_msg(self, tdict: dict[str, Any], closed: bool) -> dict[str, Any]:
         msg = {k: tdict[k] for k in ("truck", "passes", "total_kg", "std_kg", "target_kg",

@@ -40,6 +40,7 @@ from shoveld.kinematics.fixed_lag import FixedLagSavgol
 from shoveld.model.kin import Kinematics
 from shoveld.model.output import CurrentEquations, current_sigma
 from shoveld.model.params import ModelParams
+from shoveld.payload.misfit import MISFIT_WARN, round_misfit
 from shoveld.payload.rls import PayloadRls, RlsConfig
 from shoveld.payload.trucks import Truck
 from shoveld.sample import CROWD_TARGET_CHANGED, Sample
@@ -100,6 +101,9 @@ class EngineConfig:
     travel 2.3-3.5 m; the handle's stroke is 6-10.8 m), so a crowd that stands still
     is a laser measuring something else (lodged in its beam, taken between passes) or
     stuck. 0: no such test."""
+    misfit_warn: float = MISFIT_WARN
+    """A pass whose misfit is above this is logged as a warning, and still weighed
+    (:data:`shoveld.payload.misfit.MISFIT_WARN`, where the figures are)."""
     hoist_field_nominal_a: float = 70.0
     weak_field_fraction: float = 0.97
     phases: PhaseConfig = field(default_factory=PhaseConfig)
@@ -128,13 +132,18 @@ class PassResult:
     samples: int
     valid: bool
     reason: str = ""
+    misfit: float = math.nan
+    """The pass's residuals' mean square over the size the calibration's noise model gives
+    them (``PayloadRls.misfit``: 1 when the model holds; NaN: no sample). Given for
+    passes not weighed too: a change of the laser's target, say, shows there."""
 
     def as_dict(self) -> dict[str, Any]:
         return {"pass": self.index, "truck": self.truck, "start_s": round(self.start_s, 3),
                 "end_s": round(self.end_s, 3),
                 "payload_kg": None if not self.valid else round(self.payload_kg, 1),
                 "std_kg": None if not self.valid else round(self.std_kg, 1),
-                "samples": self.samples, "valid": self.valid, "reason": self.reason}
+                "samples": self.samples, "valid": self.valid, "reason": self.reason,
+                "misfit": round_misfit(self.misfit)}
 
 
 @dataclass
@@ -206,6 +215,8 @@ class Engine:
         self.settle_refused = 0
         """Passes whose settle time the test kept and refused: many refusals say the
         bank holds the dipper past the phase machine's exit (``dig_exit_deg``)."""
+        self.misfit_high = 0
+        """Passes whose misfit was above ``misfit_warn``."""
         self.pass_index = first_pass - 1
         self._cycle = 0
         """Dig cycles started: tags the lagged samples so none crosses into another cycle
@@ -397,8 +408,20 @@ class Engine:
                       "other than the handle, or is stuck")
         else:
             reason = ""
+        misfit = rls.misfit
+        if misfit > self.cfg.misfit_warn:
+            self.misfit_high += 1
+            k = self.misfit_high
+            if k in (1, 10) or k % 100 == 0:  # a machine that misfits does so all shift
+                log.warning("pass %d: misfit %.1f, the model's residuals %.1f times the "
+                            "size the calibration's noise model gives them (%s): the model "
+                            "may lack something this machine does (shoveld diagnose names "
+                            "it), or a sensor measures something else (the laser on something "
+                            "other than the handle); the pass log has every pass's misfit",
+                            self.pass_index, misfit, math.sqrt(misfit),
+                            n_of(k, "such pass so far", "such passes so far"))
         pr = PassResult(self.pass_index, self.truck.index, self.pass_start, t, rls.payload_kg,
-                        self._std(rls), rls.n, valid, reason)
+                        self._std(rls), rls.n, valid, reason, misfit)
         self.truck.passes.append(pr.as_dict())
         self.last_dump_t = t
         self.rls = self.rls_all = None

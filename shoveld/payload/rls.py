@@ -151,7 +151,9 @@ class PayloadRls:
     def misfit(self) -> float:
         """The pass's mean normalised innovation squared per degree of freedom: about 1
         when the residuals are the noise model's size, far above when the model does not
-        hold (``bench/pass_misfit.py`` measures it; the engine does not act on it)."""
+        hold (``bench/pass_misfit.py`` measures it). The engine records it with the pass
+        and warns above ``misfit_warn`` (:mod:`shoveld.payload.misfit`); it weighs the pass
+        all the same."""
         return self._nis_sum / self._nis_dof if self._nis_dof else math.nan
 
     @property

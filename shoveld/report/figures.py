@@ -12,6 +12,7 @@ from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any
 
+from shoveld.payload.misfit import misfit_high
 from shoveld.payload.trucks import Truck, rule_101020
 
 EXCHANGE_GAP_S = 120.0
@@ -41,6 +42,10 @@ class ShiftFigures:
     invalid: list[dict[str, Any]] = field(default_factory=list)
     reasons: Counter[str] = field(default_factory=Counter)
     """Passes not weighed by the kind of reason (:func:`reason_kind`)."""
+    misfits: list[float] = field(default_factory=list)
+    """The recorded misfits (a pass log written before 2026-11-29 has none)."""
+    misfit_high: list[dict[str, Any]] = field(default_factory=list)
+    """Passes whose misfit is above ``MISFIT_WARN``: the model did not fit them."""
 
     @property
     def valid_kg(self) -> list[float]:
@@ -90,4 +95,6 @@ def shift_figures(rows: list[dict[str, Any]], since: float | None = None,
             f.cycle_s.append(gap)
     f.invalid = [r for r in rows if not r["valid"]]
     f.reasons = Counter(reason_kind(str(r["reason"] or "")) for r in f.invalid)
+    f.misfits = [float(r["misfit"]) for r in rows if r.get("misfit") is not None]
+    f.misfit_high = [r for r in rows if misfit_high(r.get("misfit"))]
     return f

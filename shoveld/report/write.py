@@ -11,6 +11,7 @@ import io
 from pathlib import Path
 from typing import Any
 
+from shoveld.payload.misfit import MISFIT_WARN
 from shoveld.report.figures import ShiftFigures
 from shoveld.words import n_of
 
@@ -77,12 +78,13 @@ def write_csv(f: ShiftFigures, out: Path) -> None:
     with open(out / "passes.csv", "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
         w.writerow(["pass", "truck", "shovel", "start", "end", "payload_kg", "std_kg", "valid",
-                    "reason"])
+                    "reason", "misfit"])
         for p in f.passes:
+            m = p.get("misfit")
             w.writerow([p["pass"], p["truck"], p["shovel"], _when(p["start"]), _when(p["end"]),
                         "" if p["payload_kg"] is None else f"{p['payload_kg']:.1f}",
                         "" if p["std_kg"] is None else f"{p['std_kg']:.1f}", int(p["valid"]),
-                        p["reason"]])
+                        p["reason"], "" if m is None else f"{m:.2f}"])
     with open(out / "trucks.csv", "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
         w.writerow(["truck", "passes", "invalid_passes", "total_kg", "target_kg", "fill_pct",
@@ -166,8 +168,41 @@ def write_report(f: ShiftFigures, out: Path, title: str = "Shift report") -> Pat
             f"{e(k)}: {v}" for k, v in f.reasons.most_common()) + "</p>")
     else:
         lines.append("<p>None.</p>")
+    lines += _misfit_section(f)
     lines.append("<p>Tables: <a href='passes.csv'>passes.csv</a>, <a href='trucks.csv'>"
                  "trucks.csv</a>, <a href='hours.csv'>hours.csv</a>.</p></body></html>")
     page = out / "index.html"
     page.write_text("\n".join(lines), encoding="utf-8")
     return page
+
+
+def _misfit_section(f: ShiftFigures) -> list[str]:
+    """The passes the model did not fit: for the engineer who calibrates the meter, the
+    first sign of a machine the model no longer describes, or of a sensor that measures
+    something else (they are weighed all the same)."""
+    out = ["<h2>Passes the model did not fit</h2>"]
+    if not f.misfits:
+        out.append("<p>The pass log records no misfit for these passes (written before "
+                   "2026-11-29).</p>")
+        return out
+    ms = sorted(f.misfits)
+    out.append(f"<p>A pass's misfit is the mean square of the model's residuals over it, in "
+               f"units of the calibration's noise: about 1 when the model holds. Median "
+               f"{ms[len(ms) // 2]:.2f} over {n_of(len(ms), 'pass', 'passes')}.</p>")
+    if not f.misfit_high:
+        out.append(f"<p id='misfit'>None above {MISFIT_WARN:g}.</p>")
+        return out
+    out.append(f"<p id='misfit' class='bad'>{n_of(len(f.misfit_high), 'pass', 'passes')} "
+               f"above {MISFIT_WARN:g}: the model lacks something this machine does "
+               "(<code>shoveld diagnose</code> on its signals names it) or a sensor measures "
+               "something else (the crowd laser on something other than the handle). They "
+               "are weighed all the same.</p>")
+    out.append("<table id='misfits'><tr><th>pass</th><th>truck</th><th>ended</th>"
+               "<th>payload (t)</th><th>misfit</th></tr>")
+    for p in f.misfit_high:
+        kg = p["payload_kg"]
+        weighed = "not weighed" if kg is None else f"{kg / 1000:.1f}"
+        out.append(f"<tr><td>{p['pass']}</td><td>{p['truck']}</td><td>{_when(p['end'])}</td>"
+                   f"<td>{weighed}</td><td>{float(p['misfit']):.1f}</td></tr>")
+    out.append("</table>")
+    return out

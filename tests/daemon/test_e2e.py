@@ -13,6 +13,7 @@ from typing import Any
 import pytest
 
 from shoveld.model.params import ModelParams
+from shoveld.payload.misfit import MISFIT_WARN
 from shoveld.replay.service import replay_service
 
 from .conftest import CAPTURE, PARAMS, Collector, free_port, make_cfg
@@ -78,6 +79,11 @@ def test_committed_capture_gives_the_expected_passes_and_trucks(tmp_path: Path) 
                           str(tmp_path / "state"), "--csv"], capture_output=True, text=True,
                          check=True).stdout.splitlines()
     assert len(csv) == 4 and csv[1].startswith("1,1,e2e,")
+    # each pass says how well the model fitted it, on Zenoh and in the pass log alike: the
+    # capture's own calibration fits its passes (no warning)
+    assert all(0.0 < p["misfit"] <= MISFIT_WARN for p in passes), passes
+    assert [float(row.rsplit(",", 1)[1]) for row in csv[1:]] == [p["misfit"] for p in passes]
+    assert "misfit" not in err
 
 
 def test_paced_replay_through_the_virtual_hardware(tmp_path: Path, params: ModelParams) -> None:

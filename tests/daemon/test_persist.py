@@ -75,19 +75,26 @@ def test_readers_work_while_the_writer_holds_the_log(tmp_path: Path) -> None:
 
 def test_passes_export(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     log = PassLog(db_path(tmp_path), "s7")
+    misfits = {1: 0.81, 3: 18.25}  # pass 2 as a daemon before 2026-11-29 wrote it: none
     for n, (truck, kg) in enumerate([(1, 30000.0), (1, 31000.0), (2, 40000.0)], start=1):
-        log.write_pass(p(n, truck, kg), T0 + 100 * n, T0 + 100 * n + 20, 62000.0)
+        log.write_pass({**p(n, truck, kg), "misfit": misfits.get(n)}, T0 + 100 * n,
+                       T0 + 100 * n + 20, 62000.0)
     log.close_truck(1, 62000.0, T0 + 250)
     log.write_pass(p(4, 2, valid=False), T0 + 400, T0 + 420, 62000.0)
     log.close()
     assert main(["passes", "--state-dir", str(tmp_path), "--csv"]) == 0
     out = capsys.readouterr().out.splitlines()
-    assert out[0] == "pass,truck,shovel,start,end,payload_kg,std_kg,samples,valid,reason"
+    assert out[0] == "pass,truck,shovel,start,end,payload_kg,std_kg,samples,valid,reason,misfit"
     assert len(out) == 5 and out[1].startswith("1,1,s7,") and ",30000.0,200.0,300,1," in out[1]
-    assert out[4].endswith(",,,3,0,only 3 valid samples")
+    assert out[1].endswith(",1,,0.81") and out[2].endswith(",1,,") and out[3].endswith(",18.25")
+    assert out[4].endswith(",,,3,0,only 3 valid samples,")
     assert main(["passes", "--db", str(db_path(tmp_path)), "--since", str(T0 + 250)]) == 0
     text = capsys.readouterr().out
     assert "pass     3" in text and "pass     1" not in text
+    # a pass the model did not fit says so on its line, one it fitted says nothing
+    line3 = next(ln for ln in text.splitlines() if ln.startswith("pass     3"))
+    assert line3.endswith("misfit 18.2: the model does not fit this pass")
+    assert "misfit" not in next(ln for ln in text.splitlines() if ln.startswith("pass     4"))
     assert "truck    2: 2 passes" in text and "(open)" in text
     assert main(["passes", "--state-dir", str(tmp_path)]) == 0
     text = capsys.readouterr().out
@@ -196,3 +203,43 @@ def test_a_throwaway_pass_log_keeps_wal_and_restores_without_syncing(tmp_path: P
     assert again.con.execute("PRAGMA synchronous").fetchone()[0] == 2
     r = again.restore()
     assert r.next_pass == 3 and [x["pass"] for x in r.truck_passes] == [1, 2]
+
+
+V1_SCHEMA = """
+CREATE TABLE meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE passes (
+    pass INTEGER PRIMARY KEY, truck INTEGER NOT NULL, shovel TEXT NOT NULL,
+    start_unix REAL NOT NULL, end_unix REAL NOT NULL, start_s REAL NOT NULL,
+    end_s REAL NOT NULL, payload_kg REAL, std_kg REAL, samples INTEGER NOT NULL,
+    valid INTEGER NOT NULL, reason TEXT NOT NULL DEFAULT '', written_unix REAL NOT NULL);
+CREATE TABLE trucks (truck INTEGER PRIMARY KEY, target_kg REAL NOT NULL,
+    opened_unix REAL NOT NULL, closed_unix REAL);
+INSERT INTO meta VALUES ('schema', '1');
+INSERT INTO trucks VALUES (1, 62000.0, 1790000000.0, NULL);
+INSERT INTO passes VALUES (1, 1, 's1', 1790000000.0, 1790000008.0, 0.0, 8.0, 30000.0,
+    200.0, 300, 1, '', 1790000009.0);
+"""
+
+
+def test_a_pass_log_of_schema_1_is_read_as_it_is_and_gains_the_misfit_when_the_daemon_opens_it(
+        tmp_path: Path) -> None:
+    path = db_path(tmp_path)
+    con = sqlite3.connect(path)
+    con.executescript(V1_SCHEMA)
+    con.close()
+    # a reader does not change the log: its passes have no misfit
+    rows = read_passes(path)
+    assert [(r["pass"], r["payload_kg"], r["misfit"]) for r in rows] == [(1, 30000.0, None)]
+    cols = [r[1] for r in sqlite3.connect(path).execute("PRAGMA table_info(passes)")]
+    assert "misfit" not in cols
+    # the daemon's pass log adds the column, keeps the pass and its truck
+    log = PassLog(path, "s1")
+    r = log.restore()
+    assert r.next_pass == 2 and r.truck == 1
+    assert [(x["pass"], x["payload_kg"], x["misfit"]) for x in r.truck_passes] == [
+        (1, 30000.0, None)]
+    assert log.con.execute("SELECT value FROM meta WHERE key = 'schema'").fetchone()[0] == "2"
+    assert log.write_pass({**p(2, 1), "misfit": 0.77}, T0 + 20, T0 + 28, 62000.0)
+    log.close()
+    assert [(r["pass"], r["misfit"]) for r in read_passes(path)] == [(1, None), (2, 0.77)]
+    assert PassLog(path, "s1").restore().next_pass == 3  # opened again: nothing to add

@@ -126,3 +126,34 @@ def test_one_truck_and_one_pass_are_said_in_the_singular(tmp_path: Path, capsys)
     assert "(1 pass, 1 truck, 68.0 t)" in capsys.readouterr().out
     page = (tmp_path / "b" / "index.html").read_text()
     assert "1 pass (0 not weighed) &middot; 1 truck &middot;" in page
+
+
+def test_the_passes_the_model_did_not_fit_are_named(tmp_path: Path) -> None:
+    """A pass's misfit above the warning level is named with the pass; a log written
+    before misfits were recorded says so rather than "none"."""
+    log = PassLog(db_path(tmp_path), "s1")
+    fits = [0.8, 0.7, 24.6, 0.9, 3.4]
+    for n, m in enumerate(fits, 1):
+        t = T0 + 50.0 * n
+        valid = n != 5
+        log.write_pass({"pass": n, "truck": 1, "payload_kg": 30000.0 + n if valid else None,
+                        "std_kg": 300.0 if valid else None, "start_s": t - T0,
+                        "end_s": t - T0 + 20, "samples": 500, "valid": valid,
+                        "reason": "" if valid else "the crowd laser changed target 3.0 s "
+                        "into the pass", "misfit": m}, t, t + 20.0, TARGET)
+    log.close()
+    out = tmp_path / "r"
+    assert main(["report", "--db", str(db_path(tmp_path)), "--out", str(out)]) == 0
+    page = (out / "index.html").read_text()
+    assert "Median 0.90 over 5 passes" in page and "2 passes above 3" in page
+    table = page.split("<table id='misfits'>")[1].split("</table>")[0]
+    assert table.count("<tr>") == 3  # the header and passes 3 and 5, not the others
+    assert "<td>3</td><td>1</td>" in table and "<td>30.0</td><td>24.6</td>" in table
+    assert "not weighed</td><td>3.4</td>" in table
+    rows = list(csv.DictReader(open(out / "passes.csv")))
+    assert [r["misfit"] for r in rows] == ["0.80", "0.70", "24.60", "0.90", "3.40"]
+
+    db, _ = shift(tmp_path / "old")  # passes written without a misfit
+    assert main(["report", "--db", str(db), "--out", str(tmp_path / "r2")]) == 0
+    page = (tmp_path / "r2" / "index.html").read_text()
+    assert "records no misfit" in page and "id='misfits'" not in page
