@@ -32,6 +32,7 @@ from shoveld.daemon.publisher import Publisher
 from shoveld.daemon.store import ReadingStore
 from shoveld.engine.loop import Engine, LiveEstimate, PassResult, TruckResult
 from shoveld.model.params import ModelParams
+from shoveld.payload.misfit import round_misfit
 from shoveld.payload.trucks import Truck, rule_101020
 from shoveld.sample import Sample
 
@@ -512,6 +513,10 @@ class Service:
             e = self.engine
             loop["settle_time"] = {"seconds": e.cfg.settle_s, "kept": e.settle_kept,
                                    "refused": e.settle_refused}
+            # how well the model fitted the passes since the start (docs/engine.md, "A
+            # pass's misfit"): passes above the warning level, and the last pass's
+            loop["misfit"] = {"warn": e.cfg.misfit_warn, "passes_above": e.misfit_high,
+                              "last": round_misfit(e.last_misfit)}
         zen = self.publisher.health()
         persist = {"passes_written": self.passes_written, "queue": self._q.qsize(),
                    "last_error": self.persist_error}

@@ -217,6 +217,8 @@ class Engine:
         bank holds the dipper past the phase machine's exit (``dig_exit_deg``)."""
         self.misfit_high = 0
         """Passes whose misfit was above ``misfit_warn``."""
+        self.last_misfit = math.nan
+        """The last finished pass's misfit (NaN: none yet, or no sample in it)."""
         self.pass_index = first_pass - 1
         self._cycle = 0
         """Dig cycles started: tags the lagged samples so none crosses into another cycle
@@ -408,7 +410,7 @@ class Engine:
                       "other than the handle, or is stuck")
         else:
             reason = ""
-        misfit = rls.misfit
+        misfit = self.last_misfit = rls.misfit
         if misfit > self.cfg.misfit_warn:
             self.misfit_high += 1
             k = self.misfit_high

@@ -87,6 +87,17 @@ def test_table_through_the_service_to_zenoh(tmp_path: Path, e2e_table: SignalsTa
     assert svc.engine is not None and svc.engine.settle_kept + svc.engine.settle_refused == 3
     settle = h["loop"]["settle_time"]
     assert settle["seconds"] == 0.4 and settle["kept"] + settle["refused"] <= 3
+    # and how well the model fitted them, as the passes say (this table is today's
+    # simulator's: the capture's params fit it less well than the capture, 2.5-3.3)
+    fit = h["loop"]["misfit"]
+    misfits = [m["misfit"] for m in passes]
+    assert fit["warn"] == 3.0 and all(0.0 < m < 10.0 for m in misfits)
+    assert svc.engine.misfit_high == sum(m > 3.0 for m in misfits)
+    assert fit["passes_above"] <= svc.engine.misfit_high
+    assert svc.last_pass is not None and svc.last_pass["misfit"] == misfits[-1]
+    assert round(svc.engine.last_misfit, 2) == misfits[-1]
+    # (the last health message may have gone out before the last pass's dump)
+    assert fit["last"] in {None, *misfits}
     st = replies[0].ok
     assert str(st.encoding) == "application/json"
     import json
