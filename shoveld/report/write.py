@@ -188,7 +188,8 @@ def _misfit_section(f: ShiftFigures) -> list[str]:
     ms = sorted(f.misfits)
     out.append(f"<p>A pass's misfit is the mean square of the model's residuals over it, in "
                f"units of the calibration's noise: about 1 when the model holds. Median "
-               f"{ms[len(ms) // 2]:.2f} over {n_of(len(ms), 'pass', 'passes')}.</p>")
+               f"{ms[len(ms) // 2]:.2f} over {n_of(len(ms), 'pass', 'passes')}; a median "
+               "well above 1 says the calibration no longer fits the machine.</p>")
     if not f.misfit_high:
         out.append(f"<p id='misfit'>None above {MISFIT_WARN:g}.</p>")
         return out
