@@ -196,8 +196,8 @@ def _misfit_section(f: ShiftFigures) -> list[str]:
     out.append(f"<p id='misfit' class='bad'>{n_of(len(f.misfit_high), 'pass', 'passes')} "
                f"above {MISFIT_WARN:g}: the model lacks something this machine does "
                "(<code>shoveld diagnose</code> on its signals names it) or a sensor measures "
-               "something else (the crowd laser on something other than the handle). They "
-               "are weighed all the same.</p>")
+               "something else (the crowd laser on something other than the handle). A "
+               "misfit alone does not stop a pass being weighed.</p>")
     out.append("<table id='misfits'><tr><th>pass</th><th>truck</th><th>ended</th>"
                "<th>payload (t)</th><th>misfit</th></tr>")
     for p in f.misfit_high:
