@@ -2,8 +2,9 @@
 tell a pass weighed on a wrong crowd from a machine the model does not fully describe.
 
 The statistic is the pass's own filter's mean normalised innovation squared per degree
-of freedom (``PayloadRls.misfit``: about 1 when the model holds), read after each pass
-from the filter the engine reports. Three sets of passes:
+of freedom (``PayloadRls.misfit``: about 1 when the model holds), as the engine records
+it with each pass (``PassResult.misfit``, the pass message's ``misfit``). Three sets of
+passes:
 
 * ``--handle``: something lodged on the handle in the laser's beam, moving with it, from
   0.5-3 s after pass 1's dump to the end of the committed capture, 0.5-3 m off the
@@ -26,24 +27,6 @@ import random
 import statistics
 import tempfile
 from pathlib import Path
-from typing import Any
-
-MISFITS: list[float] = []
-"""Each finished pass's misfit, in the order the engine finished them."""
-
-
-def record_misfits() -> None:
-    """Have the engine note the misfit of the filter it reports at each pass's end."""
-    import shoveld.engine.loop as loop
-
-    final = loop.Engine._final_filter
-
-    def noted(self: Any) -> Any:
-        rls = final(self)
-        MISFITS.append(rls.misfit)
-        return rls
-
-    loop.Engine._final_filter = noted  # type: ignore[method-assign]
 
 
 def spread(xs: list[float]) -> str:
@@ -54,12 +37,11 @@ def spread(xs: list[float]) -> str:
 def run_handle(seeds: int) -> None:
     import laser_strays as ls
 
-    MISFITS.clear()
     base = ls.replay(ls.CAPTURE)
     clean = dict(base["passes"])
     print("something on the handle after pass 1's dump, to the end (pass: kg off the clean "
           "capture's, misfit)")
-    print(f"  clean capture: misfits {' '.join(f'{m:.2f}' for m in MISFITS)}")
+    print(f"  clean capture: misfits {' '.join(f'{m:.2f}' for m in base['misfits'].values())}")
     end1, end = base["spans"][0][2], base["spans"][-1][2]
     with tempfile.TemporaryDirectory() as tmp:
         for seed in range(1, seeds + 1):
@@ -68,18 +50,21 @@ def run_handle(seeds: int) -> None:
             off = rng.choice((-1, 1)) * rng.randint(500, 3000)
             cap = ls.stray_capture(Path(tmp) / f"h{seed}", 0.0, seed, True,
                                    blocks=[(t0, end + 100.0, off)])
-            MISFITS.clear()
             r = ls.replay(cap)
             cells = []
-            for (no, kg), m in zip(r["passes"], MISFITS, strict=True):
+            for no, kg in r["passes"]:
+                m = r["misfits"][no]
                 what = "not weighed" if kg is None else f"{kg - clean[no]:+9.0f} kg"
-                cells.append(f"pass {no}: {what}, misfit {m:7.2f}")
+                fit = "   none" if m is None else f"{m:7.2f}"  # no valid sample
+                cells.append(f"pass {no}: {what}, misfit {fit}")
             print(f"  seed {seed:2d}, {off:+5d} mm: " + "; ".join(cells))
 
 
 def run_machines(n: int) -> None:
     import payload_accuracy as pa
 
+    from shoveld.engine.loop import EngineConfig
+    from shoveld.engine.offline import estimate_table
     from shoveld.sim.machine import Machine
     from shoveld.sim.scenario import simulate_cycles
 
@@ -90,9 +75,9 @@ def run_machines(n: int) -> None:
             machine = Machine.draw(seed) if kind == "realistic" else Machine.ideal()
             res = simulate_cycles(60, seed=10 * seed + 3, machine=machine,
                                   payload_range=(3000.0, 35000.0), truck_target_kg=None)
-            MISFITS.clear()
-            pa.passes(pa.calibrate(machine, seed, "output"), res)
-            every.extend(MISFITS)
+            est = estimate_table(res.table, pa.calibrate(machine, seed, "output"),
+                                 EngineConfig(**pa.ENGINE))
+            every.extend(p.misfit for p in est.passes)
         print(f"  {kind:10s} {len(every):5d} passes  {spread(every)}")
 
 
@@ -110,9 +95,9 @@ def run_effects() -> None:
             every: list[float] = []
             for seed in (1, 2):
                 calib, measured, _ = simulate({name: size}, seed, 24)
-                MISFITS.clear()
-                estimate_table(measured[0], Calibrator(method="output").fit(calib).params_)
-                every.extend(MISFITS)
+                est = estimate_table(measured[0],
+                                     Calibrator(method="output").fit(calib).params_)
+                every.extend(p.misfit for p in est.passes)
             print(f"  {name:24s} {size:8.3f}  {spread(every)}")
 
 
@@ -128,7 +113,6 @@ def main() -> None:
     import logging
 
     logging.basicConfig(level=logging.ERROR)
-    record_misfits()
     if args.handle:
         run_handle(args.seeds)
     if args.machines:
