@@ -15,9 +15,15 @@ passes:
   ``bench/payload_accuracy.py`` (seeds 1..N, 60 passes each): the misfit's spread;
 * ``--effects``: each simulated hidden effect alone at the bottom and the top of its
   typical range on ``bench/diagnose_matrix.py``'s machines (seeds 1, 2; 24 passes), the
-  base model calibrated on the effect's own trials: the misfit's median and spread.
+  base model calibrated on the effect's own trials: the misfit's median and spread;
+* ``--drift N``: a calibration that no longer fits its machine. Realistic machines
+  (seeds 1000, 2000, ... N of them) calibrated on their trials, then one part of the
+  machine changed (a dipper 5 % heavier, the hoist's or the crowd's pull per ampere 5 %
+  weaker, friction half as much again, 15 % more inertia) and 12 passes weighed with the
+  old calibration: the passes' median error and their misfit.
 
     .venv/bin/python bench/pass_misfit.py [--handle] [--seeds 8] [--machines 18] [--effects]
+        [--drift 2]
 """
 
 from __future__ import annotations
@@ -101,15 +107,54 @@ def run_effects() -> None:
             print(f"  {name:24s} {size:8.3f}  {spread(every)}")
 
 
+DRIFTS: dict[str, dict[str, float]] = {
+    "nothing changed": {}, "dipper +5 %": {"Md": 1.05}, "hoist pull -5 %": {"K_H": 0.95},
+    "crowd pull -5 %": {"K_C": 0.95}, "handle friction x1.5": {"fc3": 1.5, "fv3": 1.5},
+    "arm inertia +15 %": {"Izz": 1.15}}
+"""Changes of the machine after its calibration, as factors on its plant's values."""
+
+
+def run_drift(n: int) -> None:
+    from dataclasses import replace
+
+    from shoveld.engine.offline import estimate_table
+    from shoveld.identify.calibrate import Calibrator
+    from shoveld.sim.machine import Machine
+    from shoveld.sim.scenario import simulate_calibration, simulate_cycles
+
+    print("the machine changed after its calibration, 12 passes weighed with the old one: "
+          "median pass error, misfit median (range)")
+    for seed in range(1000, 1000 * n + 1, 1000):
+        m = Machine.draw(seed)
+        trials = [simulate_calibration(kg, seed + k, machine=m).table
+                  for k, kg in ((1, 0.0), (2, 8420.0))]
+        params = Calibrator(method="output").fit(trials).params_
+        for name, change in DRIFTS.items():
+            plant = replace(m.plant, **{k: getattr(m.plant, k) * f for k, f in change.items()})
+            res = simulate_cycles(12, seed + 3, machine=replace(m, plant=plant),
+                                  payload_range=(3000.0, 35000.0), truck_target_kg=None)
+            est = estimate_table(res.table, params)
+            errs = []
+            for tp in res.passes:
+                near = [p for p in est.passes if abs(p.start_s - tp.phases["dig"][0]) < 2.0]
+                if near and near[0].valid:
+                    errs.append(near[0].payload_kg - tp.payload_kg)
+            ms = [p.misfit for p in est.passes]
+            print(f"  machine {seed}  {name:22s} error {statistics.median(errs):+7.0f} kg  "
+                  f"misfit {statistics.median(ms):5.2f} ({min(ms):.2f}-{max(ms):.2f})",
+                  flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--handle", action="store_true")
     ap.add_argument("--seeds", type=int, default=8)
     ap.add_argument("--machines", type=int, default=0)
     ap.add_argument("--effects", action="store_true")
+    ap.add_argument("--drift", type=int, default=0, metavar="N")
     args = ap.parse_args()
-    if not (args.handle or args.machines or args.effects):
-        ap.error("say what to measure: --handle, --machines N or --effects")
+    if not (args.handle or args.machines or args.effects or args.drift):
+        ap.error("say what to measure: --handle, --machines N, --effects or --drift N")
     import logging
 
     logging.basicConfig(level=logging.ERROR)
@@ -119,6 +164,8 @@ def main() -> None:
         run_machines(args.machines)
     if args.effects:
         run_effects()
+    if args.drift:
+        run_drift(args.drift)
 
 
 if __name__ == "__main__":

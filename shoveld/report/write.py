@@ -188,8 +188,10 @@ def _misfit_section(f: ShiftFigures) -> list[str]:
     ms = sorted(f.misfits)
     out.append(f"<p>A pass's misfit is the mean square of the model's residuals over it, in "
                f"units of the calibration's noise: about 1 when the model holds. Median "
-               f"{ms[len(ms) // 2]:.2f} over {n_of(len(ms), 'pass', 'passes')}; a median "
-               "well above 1 says the calibration no longer fits the machine.</p>")
+               f"{ms[len(ms) // 2]:.2f} over {n_of(len(ms), 'pass', 'passes')}. It is not "
+               "a check of the weight: a machine changed since its calibration in a way "
+               "that looks like payload (a dipper 5 % heavier) leaves it near 1 and every "
+               "pass tonnes heavy; only a known load weighed says that.</p>")
     if not f.misfit_high:
         out.append(f"<p id='misfit'>None above {MISFIT_WARN:g}.</p>")
         return out
