@@ -20,7 +20,8 @@ passes:
   (seeds 1000, 2000, ... N of them) calibrated on their trials, then one part of the
   machine changed (a dipper 5 % heavier, the hoist's or the crowd's pull per ampere 5 %
   weaker, friction half as much again, 15 % more inertia) and 12 passes weighed with the
-  old calibration: the passes' median error and their misfit.
+  old calibration: the passes' median error, their misfit, and the empty dipper as the
+  engine weighs it on each return (``EmptyCheck``).
 
     .venv/bin/python bench/pass_misfit.py [--handle] [--seeds 8] [--machines 18] [--effects]
         [--drift 2]
@@ -123,7 +124,7 @@ def run_drift(n: int) -> None:
     from shoveld.sim.scenario import simulate_calibration, simulate_cycles
 
     print("the machine changed after its calibration, 12 passes weighed with the old one: "
-          "median pass error, misfit median (range)")
+          "median pass error, misfit median (range), the empty dipper on the returns")
     for seed in range(1000, 1000 * n + 1, 1000):
         m = Machine.draw(seed)
         trials = [simulate_calibration(kg, seed + k, machine=m).table
@@ -140,8 +141,11 @@ def run_drift(n: int) -> None:
                 if near and near[0].valid:
                     errs.append(near[0].payload_kg - tp.payload_kg)
             ms = [p.misfit for p in est.passes]
+            empty = [e.payload_kg for e in est.empties]
             print(f"  machine {seed}  {name:22s} error {statistics.median(errs):+7.0f} kg  "
-                  f"misfit {statistics.median(ms):5.2f} ({min(ms):.2f}-{max(ms):.2f})",
+                  f"misfit {statistics.median(ms):5.2f} ({min(ms):.2f}-{max(ms):.2f})  "
+                  f"empty dipper {statistics.median(empty):+6.0f} kg "
+                  f"({min(empty):+.0f} to {max(empty):+.0f}, {len(empty)} returns)",
                   flush=True)
 
 

@@ -517,6 +517,14 @@ class Service:
             # pass's misfit"): passes above the warning level, and the last pass's
             loop["misfit"] = {"warn": e.cfg.misfit_warn, "passes_above": e.misfit_high,
                               "last": round_misfit(e.last_misfit)}
+            # the empty dipper weighed on the returns (docs/engine.md, "The empty dipper
+            # on its returns"): the median of the last few, and how often it was beyond
+            checks = e.empty_checks
+            loop["empty_dipper"] = {
+                "warn_kg": e.cfg.empty_warn_kg, "returns": len(checks),
+                "last_kg": round(checks[-1], 1) if checks else None,
+                "median_kg": round(e.empty_median, 1) if checks else None,
+                "checks_beyond": e.empty_warned}
         zen = self.publisher.health()
         persist = {"passes_written": self.passes_written, "queue": self._q.qsize(),
                    "last_error": self.persist_error}

@@ -24,6 +24,7 @@ from shoveld.cycle.phases import (
     IDLE,
     LIFT,
     PHASES,
+    RETURN,
     SWING,
     PhaseConfig,
     PhaseMachine,
@@ -47,6 +48,20 @@ from shoveld.sample import CROWD_TARGET_CHANGED, Sample
 from shoveld.words import n_of
 
 log = logging.getLogger(__name__)
+
+EMPTY_USE = 3
+"""A sample's ``use`` on a return: the empty dipper's (2 and 1: a pass's, settled and in
+its settle time; 0: none)."""
+EMPTY_S = 4.0
+"""Seconds of each return weighed, after its settle time: a return through a truck
+exchange lasts much longer, and a few seconds already weigh the empty dipper to about
+a tenth of ``empty_warn_kg``."""
+EMPTY_EVERY_S = 0.04
+"""One sample in this many seconds is weighed on a return (every fourth at 100 Hz): the
+check needs no more, and each weighed sample costs the loop a fit of its rates."""
+EMPTY_BATCH = round(EMPTY_S / EMPTY_EVERY_S) + 1
+"""Samples per update of the empty dipper's filter: a whole return in one block, as
+nothing is shown live from it (a block's cost is mostly per block, not per row)."""
 
 _all = np.logical_and.reduce
 _isfinite = np.isfinite
@@ -104,6 +119,15 @@ class EngineConfig:
     misfit_warn: float = MISFIT_WARN
     """A pass whose misfit is above this is logged as a warning, and still weighed
     (:data:`shoveld.payload.misfit.MISFIT_WARN`, where the figures are)."""
+    empty_warn_kg: float = 500.0
+    """The empty dipper weighed on its returns (:class:`EmptyCheck`): when the median of
+    the last ``empty_returns`` is further than this from zero, the daemon warns that the
+    dipper carries material back, or that the machine has changed since its calibration.
+    ``bench/pass_misfit.py --drift 3`` measures the returns of realistic simulated
+    machines unchanged and changed since their calibration (docs/engine.md, "The empty
+    dipper on its returns"). 0: no check."""
+    empty_returns: int = 5
+    """Returns the empty check takes the median of."""
     hoist_field_nominal_a: float = 70.0
     weak_field_fraction: float = 0.97
     phases: PhaseConfig = field(default_factory=PhaseConfig)
@@ -147,6 +171,27 @@ class PassResult:
 
 
 @dataclass
+class EmptyCheck:
+    """The empty dipper weighed on a return, from the dump to the next dig: zero when
+    the calibration still fits the machine and nothing stays in the dipper. Not a
+    payload: it corrects nothing, it checks."""
+
+    after_pass: int
+    """The pass whose dump the return followed."""
+    end_s: float
+    payload_kg: float
+    std_kg: float
+    samples: int
+    median_kg: float
+    """The median of the last ``empty_returns`` checks, this one included."""
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"after_pass": self.after_pass, "end_s": round(self.end_s, 3),
+                "payload_kg": round(self.payload_kg, 1), "std_kg": round(self.std_kg, 1),
+                "samples": self.samples, "median_kg": round(self.median_kg, 1)}
+
+
+@dataclass
 class TruckResult:
     truck: Truck
     closed: bool
@@ -155,7 +200,7 @@ class TruckResult:
         return {**self.truck.as_dict(), "closed": self.closed}
 
 
-Event = LiveEstimate | PassResult | TruckResult
+Event = LiveEstimate | PassResult | TruckResult | EmptyCheck
 
 
 def smoothing(params: ModelParams, cfg: EngineConfig) -> tuple[float, int]:
@@ -219,6 +264,17 @@ class Engine:
         """Passes whose misfit was above ``misfit_warn``."""
         self.last_misfit = math.nan
         """The last finished pass's misfit (NaN: none yet, or no sample in it)."""
+        self.rls_empty: PayloadRls | None = None
+        """The empty dipper's filter while it returns (:class:`EmptyCheck`)."""
+        self.return_start = math.nan
+        self._empty_tick = 0
+        self._empty_every = max(1, round(EMPTY_EVERY_S / dt))
+        self.empty_checks: list[float] = []
+        """The last ``empty_returns`` empty-dipper weights, oldest first."""
+        self.empty_warned = 0
+        """Checks whose median was beyond ``empty_warn_kg``."""
+        self.empty_median = math.nan
+        """The median of ``empty_checks``."""
         self.pass_index = first_pass - 1
         self._cycle = 0
         """Dig cycles started: tags the lagged samples so none crosses into another cycle
@@ -287,9 +343,19 @@ class Engine:
         # which samples the payload may use: 2 settled, 1 in the settle time, 0 none
         use = (0 if not estimating else 2 if t - self.dig_end >= self._settle_s
                else self._early_use)
+        # a return weighs the empty dipper (its own filter), from a settle time after
+        # the dump on (3: an empty-dipper sample); the batch is kept for it as for a pass
+        weighing = estimating
+        if ph == RETURN and self.rls_empty is not None:
+            weighing = True
+            since = t - self.return_start - self._settle_s
+            if 0.0 <= since <= EMPTY_S:
+                self._empty_tick += 1
+                if self._empty_tick % self._empty_every == 0:
+                    use = EMPTY_USE
         lag = self.lagged
         if self._kalman_rates:
-            if use and self.rls is not None:
+            if use and (self.rls is not None or self.rls_empty is not None):
                 valid = self._update(s, th, d, sw, thd, dd, swd, thdd, ddd, swdd, use)
         else:
             if t - lag.last_t > lag.late:  # ticks the loop skipped: holes in the window
@@ -302,9 +368,10 @@ class Engine:
             if tag is None:
                 if estimating:
                     self.invalid_updates += 1
-            elif tag[1] and tag[2] == self._cycle and self.rls is not None:
+            elif tag[1] and tag[2] == self._cycle and (self.rls is not None
+                                                        or self.rls_empty is not None):
                 valid = self._lagged(tag, ph) or valid
-        if self.batch and not estimating:
+        if self.batch and not weighing:
             self._flush()
         rls = self.rls
         if rls is not None and rls.n:
@@ -336,6 +403,16 @@ class Engine:
     # -- internals --------------------------------------------------------------------
     def _transition(self, prev: int, ph: int, t: float) -> list[Event]:
         out: list[Event] = []
+        if prev == RETURN and self.rls_empty is not None:
+            out.extend(self._finish_empty(t))
+        if ph == RETURN and self.rls is None and prev == DUMP and self.cfg.empty_warn_kg > 0:
+            # the pass was weighed at its dump: the dipper is empty now
+            lag = round(self.window_s / self.dt) if self.current_noise else 0
+            self.rls_empty = PayloadRls(self.noise, self.dt * self._empty_every,
+                                        self.cfg.rls, hac_lag=lag // self._empty_every)
+            self.return_start = t
+            self._empty_tick = 0
+            self.batch.clear()
         if ph == DIG:
             if t - self.last_dump_t > self.cfg.truck_gap_s:
                 out.extend(self.new_truck())
@@ -365,6 +442,32 @@ class Engine:
             self._rows = []
             self.pass_index -= 1
         return out
+
+    def _finish_empty(self, t: float) -> list[Event]:
+        """The return is over: the empty dipper's weight, if the return had enough
+        samples, and a warning when the last returns' median is far from zero."""
+        self._flush()
+        rls = self.rls_empty
+        assert rls is not None
+        self.rls_empty = None
+        if rls.n < self.cfg.min_samples:
+            return []
+        kg = rls.payload_kg
+        checks = self.empty_checks
+        checks.append(kg)
+        del checks[:-max(1, self.cfg.empty_returns)]
+        med = self.empty_median = float(np.median(checks))
+        if len(checks) >= self.cfg.empty_returns and abs(med) > self.cfg.empty_warn_kg:
+            self.empty_warned += 1
+            k = self.empty_warned
+            if k in (1, 10) or k % 100 == 0:
+                log.warning("the empty dipper weighs %+.0f kg on its returns (median of the "
+                            "last %d; %s): material stays in the dipper, or the machine has "
+                            "changed since its calibration (weigh a known load, calibrate "
+                            "again); the passes may be off too",
+                            med, len(checks), n_of(k, "such check so far",
+                                                   "such checks so far"))
+        return [EmptyCheck(self.pass_index, t, kg, rls.std_kg, rls.n, med)]
 
     def _final_filter(self) -> PayloadRls:
         """The pass's filter to report: with the settle time's samples when they agree
@@ -437,7 +540,8 @@ class Engine:
                 self.invalid_updates += 1
             return False
         s_lag, use, cycle_lag = tag
-        if use and cycle_lag == self._cycle and self.rls is not None:
+        if use and cycle_lag == self._cycle and (self.rls is not None
+                                                  or self.rls_empty is not None):
             # the fit only where it is used; as Python floats, which the checks and the
             # batch's array take faster than numpy scalars (the same values)
             q, v, a = self.lagged.derivatives().tolist()
@@ -461,13 +565,14 @@ class Engine:
         pitch = 0.0 if math.isnan(s.pitch_deg) else s.pitch_deg
         self.batch.append((s.time_s, th, thd, thdd, d, dd, ddd, boom, i_h, s.crowd_a,
                            s.hoist_field_a, sw, swd, swdd, roll, pitch, use))
-        if len(self.batch) >= self.cfg.batch:
+        if len(self.batch) >= (self.cfg.batch if self.rls is not None else EMPTY_BATCH):
             self._flush()
         return True
 
     def _flush(self) -> None:
         """Evaluate the model once for the queued samples and update the filter."""
-        if not self.batch or self.rls is None:
+        target = self.rls if self.rls is not None else self.rls_empty
+        if not self.batch or target is None:
             self.batch.clear()
             return
         c = np.array(self.batch).T
@@ -476,7 +581,7 @@ class Engine:
                        boom=np.radians(c[7]), i_h=c[8], i_c=c[9], i_hf=c[10], swing=c[11],
                        swing_rate=c[12], swing_acc=c[13], roll=np.radians(c[14]),
                        pitch=np.radians(c[15]))
-        m = self.rls.payload_kg if self.rls.n else 0.0
+        m = target.payload_kg if target.n else 0.0
         if self.current_noise:
             # Current units: measured minus predicted current per channel, each sample
             # weighted by its channel's noise at its reading (shoveld.model.output).
@@ -501,8 +606,20 @@ class Engine:
     def _apply(self, use: np.ndarray, a: np.ndarray, b: np.ndarray, db_dp: np.ndarray,
                sig: np.ndarray | None) -> None:
         """A block's rows into the pass: the settled ones into the live filter, every one
-        (once the pass has a settle time) kept for the filter with the settle time."""
-        assert self.rls is not None
+        (once the pass has a settle time) kept for the filter with the settle time. On a
+        return, into the empty dipper's filter."""
+        if self.rls is None:
+            assert self.rls_empty is not None
+            # only the return's own rows: the pass's last ones, half a window late, may
+            # still come in a return that began sooner after the dump
+            own = use == EMPTY_USE
+            if not own.all():
+                if not own.any():
+                    return
+                a, b, db_dp = a[own], b[own], db_dp[own]
+                sig = None if sig is None else sig[own]
+            self.rls_empty.update(a, b, db_dp, sigma=sig)
+            return
         # A pass's rows come in time order, its settle time's first, so a block whose first
         # row is settled is settled throughout (one look, not an array test per block).
         settled = not len(use) or use[0] == 2

@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from shoveld.engine.loop import (
+    EmptyCheck,
     Engine,
     EngineConfig,
     LiveEstimate,
@@ -24,6 +25,8 @@ class Estimate:
     trucks: list[Truck] = field(default_factory=list)
     live: list[LiveEstimate] = field(default_factory=list)
     """Every tick's live estimate, when asked for (plots)."""
+    empties: list[EmptyCheck] = field(default_factory=list)
+    """The empty dipper weighed on each return."""
 
 
 def estimate_table(table: SignalsTable, params: ModelParams, cfg: EngineConfig | None = None,
@@ -40,6 +43,8 @@ def estimate_table(table: SignalsTable, params: ModelParams, cfg: EngineConfig |
             out.passes.append(ev)
         elif isinstance(ev, TruckResult) and ev.closed:
             out.trucks.append(ev.truck)
+        elif isinstance(ev, EmptyCheck):
+            out.empties.append(ev)
         elif keep_live and isinstance(ev, LiveEstimate):
             out.live.append(ev)
     return out

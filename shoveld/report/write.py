@@ -191,7 +191,8 @@ def _misfit_section(f: ShiftFigures) -> list[str]:
                f"{ms[len(ms) // 2]:.2f} over {n_of(len(ms), 'pass', 'passes')}. It is not "
                "a check of the weight: a machine changed since its calibration in a way "
                "that looks like payload (a dipper 5 % heavier) leaves it near 1 and every "
-               "pass tonnes heavy; only a known load weighed says that.</p>")
+               "pass tonnes heavy; the empty dipper weighed on the returns says that (the "
+               "daemon's log and health) and a known load does.</p>")
     if not f.misfit_high:
         out.append(f"<p id='misfit'>None above {MISFIT_WARN:g}.</p>")
         return out

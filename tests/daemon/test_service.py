@@ -98,6 +98,12 @@ def test_table_through_the_service_to_zenoh(tmp_path: Path, e2e_table: SignalsTa
     assert round(svc.engine.last_misfit, 2) == misfits[-1]
     # (the last health message may have gone out before the last pass's dump)
     assert fit["last"] in {None, *misfits}
+    # the empty dipper on the returns: one after each pass but the last, fewer than the
+    # five the warning takes the median of
+    empty = h["loop"]["empty_dipper"]
+    assert len(svc.engine.empty_checks) == 2 and svc.engine.empty_warned == 0
+    assert empty["warn_kg"] == 500.0 and empty["returns"] <= 2 and empty["checks_beyond"] == 0
+    assert empty["last_kg"] in {None, *(round(kg, 1) for kg in svc.engine.empty_checks)}
     st = replies[0].ok
     assert str(st.encoding) == "application/json"
     import json
