@@ -48,8 +48,10 @@ from shoveld.diagnose.core import MODELLED_BY_BASE  # noqa: E402
 RATED = 35000.0
 
 
-def simulate(spec: dict[str, float], seed: int, passes: int, ideal: bool = False
-             ) -> tuple[list[Any], list[Any], float]:
+def simulate_session(spec: dict[str, float], seed: int, passes: int, ideal: bool = False
+                     ) -> tuple[list[Any], Any]:
+    """The two calibration trials' tables and the session of cycles (a ``SimResult``,
+    its passes' truth with it) of one case, the effects of ``spec`` in their bench form."""
     from shoveld.sim.effects import make_effects
     from shoveld.sim.machine import Machine
     from shoveld.sim.scenario import simulate_calibration, simulate_cycles
@@ -64,8 +66,14 @@ def simulate(spec: dict[str, float], seed: int, passes: int, ideal: bool = False
     ops = simulate_cycles(passes, base + 3, payload_range=(3000.0, 35000.0),
                           truck_target_kg=None, verified_fraction=0.5, effects=fx(),
                           machine=machine)
+    return [c0.table, c1.table], ops
+
+
+def simulate(spec: dict[str, float], seed: int, passes: int, ideal: bool = False
+             ) -> tuple[list[Any], list[Any], float]:
+    calib, ops = simulate_session(spec, seed, passes, ideal)
     crb = float(np.mean([p.crb_kg for p in ops.passes if p.verified]))
-    return [c0.table, c1.table], [ops.table], crb
+    return calib, [ops.table], crb
 
 
 def one(job: dict[str, Any]) -> dict[str, Any]:

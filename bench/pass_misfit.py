@@ -30,10 +30,12 @@ passes:
 from __future__ import annotations
 
 import argparse
+import math
 import random
 import statistics
 import tempfile
 from pathlib import Path
+from typing import Any
 
 
 def spread(xs: list[float]) -> str:
@@ -88,24 +90,43 @@ def run_machines(n: int) -> None:
         print(f"  {kind:10s} {len(every):5d} passes  {spread(every)}")
 
 
+def pass_errors(est: Any, res: Any) -> list[float]:
+    """Each weighed pass's error against the simulated truth (passes matched by start)."""
+    out = []
+    for tp in res.passes:
+        near = [p for p in est.passes if abs(p.start_s - tp.phases["dig"][0]) < 2.0]
+        if near and near[0].valid:
+            out.append(near[0].payload_kg - tp.payload_kg)
+    return out
+
+
 def run_effects() -> None:
-    from diagnose_matrix import simulate
+    from diagnose_matrix import simulate_session
 
     from shoveld.engine.offline import estimate_table
     from shoveld.identify.calibrate import Calibrator
     from shoveld.sim.effects import SIM_EFFECTS
 
     print("each hidden effect alone at the bottom and the top of its typical range, base "
-          "model, seeds 1-2, 24 passes each")
+          "model, seeds 1-2, 24 passes each: the misfit; the passes' error, median (RMS); "
+          "the empty dipper on the returns, median (range)")
     for name in sorted(SIM_EFFECTS):
         for size in SIM_EFFECTS[name].typical_range:
             every: list[float] = []
+            errs: list[float] = []
+            empty: list[float] = []
             for seed in (1, 2):
-                calib, measured, _ = simulate({name: size}, seed, 24)
-                est = estimate_table(measured[0],
+                calib, ops = simulate_session({name: size}, seed, 24)
+                est = estimate_table(ops.table,
                                      Calibrator(method="output").fit(calib).params_)
                 every.extend(p.misfit for p in est.passes)
-            print(f"  {name:24s} {size:8.3f}  {spread(every)}")
+                errs.extend(pass_errors(est, ops))
+                empty.extend(e.payload_kg for e in est.empties)
+            rms = math.sqrt(statistics.fmean(e * e for e in errs))
+            print(f"  {name:24s} {size:8.3f}  {spread(every)}  error "
+                  f"{statistics.median(errs):+6.0f} ({rms:4.0f}) kg  empty "
+                  f"{statistics.median(empty):+6.0f} ({min(empty):+.0f} to {max(empty):+.0f}) kg",
+                  flush=True)
 
 
 DRIFTS: dict[str, dict[str, float]] = {
@@ -135,11 +156,7 @@ def run_drift(n: int) -> None:
             res = simulate_cycles(12, seed + 3, machine=replace(m, plant=plant),
                                   payload_range=(3000.0, 35000.0), truck_target_kg=None)
             est = estimate_table(res.table, params)
-            errs = []
-            for tp in res.passes:
-                near = [p for p in est.passes if abs(p.start_s - tp.phases["dig"][0]) < 2.0]
-                if near and near[0].valid:
-                    errs.append(near[0].payload_kg - tp.payload_kg)
+            errs = pass_errors(est, res)
             ms = [p.misfit for p in est.passes]
             empty = [e.payload_kg for e in est.empties]
             print(f"  machine {seed}  {name:22s} error {statistics.median(errs):+7.0f} kg  "

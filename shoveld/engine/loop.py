@@ -122,7 +122,8 @@ class EngineConfig:
     empty_warn_kg: float = 500.0
     """The empty dipper weighed on its returns (:class:`EmptyCheck`): when the median of
     the last ``empty_returns`` is further than this from zero, the daemon warns that the
-    dipper carries material back, or that the machine has changed since its calibration.
+    dipper carries material back, that the machine has changed since its calibration, or
+    that the model lacks something it does.
     ``bench/pass_misfit.py --drift 3`` measures the returns of realistic simulated
     machines unchanged and changed since their calibration (docs/engine.md, "The empty
     dipper on its returns"). 0: no check."""
@@ -464,7 +465,9 @@ class Engine:
                 log.warning("the empty dipper weighs %+.0f kg on its returns (median of the "
                             "last %d; %s): material stays in the dipper, or the machine has "
                             "changed since its calibration (weigh a known load, calibrate "
-                            "again); the passes may be off too",
+                            "again), or the model lacks something this machine does in its "
+                            "fast returns (shoveld diagnose names it); the passes may be off "
+                            "too",
                             med, len(checks), n_of(k, "such check so far",
                                                    "such checks so far"))
         return [EmptyCheck(self.pass_index, t, kg, rls.std_kg, rls.n, med)]
