@@ -77,17 +77,25 @@ def run_machines(n: int) -> None:
     from shoveld.sim.machine import Machine
     from shoveld.sim.scenario import simulate_cycles
 
-    print(f"simulated machines 1..{n}, 60 passes each: misfit per pass")
+    print(f"simulated machines 1..{n}, 60 passes each: misfit per pass; the empty dipper "
+          "on each return, and the largest median of five returns (the warning's)")
     for kind in ("realistic", "ideal"):
         every: list[float] = []
+        empty: list[float] = []
+        medians: list[float] = []
         for seed in range(1, n + 1):
             machine = Machine.draw(seed) if kind == "realistic" else Machine.ideal()
             res = simulate_cycles(60, seed=10 * seed + 3, machine=machine,
                                   payload_range=(3000.0, 35000.0), truck_target_kg=None)
-            est = estimate_table(res.table, pa.calibrate(machine, seed, "output"),
-                                 EngineConfig(**pa.ENGINE))
+            cfg = EngineConfig(**pa.ENGINE)
+            est = estimate_table(res.table, pa.calibrate(machine, seed, "output"), cfg)
             every.extend(p.misfit for p in est.passes)
+            empty.extend(e.payload_kg for e in est.empties)
+            medians.extend(abs(e.median_kg) for e in est.empties[cfg.empty_returns - 1:])
         print(f"  {kind:10s} {len(every):5d} passes  {spread(every)}")
+        print(f"  {kind:10s} {len(empty):5d} returns  empty dipper {min(empty):+.0f} to "
+              f"{max(empty):+.0f} kg, median of five at most {max(medians):.0f} kg",
+              flush=True)
 
 
 def pass_errors(est: Any, res: Any) -> list[float]:
