@@ -221,7 +221,7 @@ def main() -> None:
         elapsed = time.monotonic() - t_start
     print(f"kills: {sum(kinds.values())} in {elapsed:.0f} s ("
           + ", ".join(f"{k} {kinds[k]}" for k in KINDS) + "); the reference run: first "
-          f"pass at {first:.2f} s, last event at {run_s:.2f} s, shut-down "
+          f"pass at {first:.2f} s, last event at {run_s:.2f} s; shut-down (the shortest of five) "
           f"{1e3 * shutdown_s:.0f} ms")
     if missed:
         print("  runs that ended before their kill (audited, and the kill drawn again): "
