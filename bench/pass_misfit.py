@@ -99,13 +99,11 @@ def run_machines(n: int) -> None:
 
 
 def pass_errors(est: Any, res: Any) -> list[float]:
-    """Each weighed pass's error against the simulated truth (passes matched by start)."""
-    out = []
-    for tp in res.passes:
-        near = [p for p in est.passes if abs(p.start_s - tp.phases["dig"][0]) < 2.0]
-        if near and near[0].valid:
-            out.append(near[0].payload_kg - tp.payload_kg)
-    return out
+    """Each weighed pass's error against the simulated truth."""
+    from payload_accuracy import weighed
+
+    return [got.payload_kg - tp.payload_kg for tp in res.passes
+            if (got := weighed(est, tp)) is not None]
 
 
 def run_effects() -> None:

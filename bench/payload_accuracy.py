@@ -120,6 +120,13 @@ def calibrate_with_verified(machine: Any, seed: int, n: int) -> Any:
     return cal.params_
 
 
+def weighed(est: Any, tp: Any) -> Any:
+    """The engine's pass of a simulated pass ``tp`` (the one that started within 2 s of
+    its dig), if it was weighed, else None."""
+    near = [p for p in est.passes if abs(p.start_s - tp.phases["dig"][0]) < 2.0]
+    return near[0] if near and near[0].valid else None
+
+
 def passes(params: Any, res: Any, table: Any = None, cfg: Any = None
            ) -> list[dict[str, float]]:
     """Each simulated pass of ``res`` against the engine's: truth, bound, error, std.
@@ -134,13 +141,13 @@ def passes(params: Any, res: Any, table: Any = None, cfg: Any = None
     field = table.columns["hoist_field_a"]
     out = []
     for tp in res.passes:
-        near = [p for p in est.passes if abs(p.start_s - tp.phases["dig"][0]) < 2.0]
+        got = weighed(est, tp)
         lift = (t >= tp.phases["lift"][0]) & (t < tp.phases["swing"][1])
         row = {"truth": tp.payload_kg, "crb": tp.crb_kg,
                "weak": bool(np.nanmin(field[lift]) < 60.0) if lift.any() else False,
-               "valid": bool(near and near[0].valid)}
-        if row["valid"]:
-            row.update(err=near[0].payload_kg - tp.payload_kg, std=near[0].std_kg)
+               "valid": got is not None}
+        if got is not None:
+            row.update(err=got.payload_kg - tp.payload_kg, std=got.std_kg)
         out.append(row)
     return out
 

@@ -63,6 +63,14 @@ EMPTY_BATCH = round(EMPTY_S / EMPTY_EVERY_S) + 1
 """Samples per update of the empty dipper's filter: a whole return in one block, as
 nothing is shown live from it (a block's cost is mostly per block, not per row)."""
 
+
+def _now_and_then(k: int) -> bool:
+    """Whether the k-th warning of a kind is logged: the first, the tenth and every
+    hundredth (a machine that misfits, or weighs its empty dipper wrong, does so all
+    shift; the counts are in health)."""
+    return k in (1, 10) or k % 100 == 0
+
+
 _all = np.logical_and.reduce
 _isfinite = np.isfinite
 _RAD = math.pi / 180.0
@@ -247,6 +255,9 @@ class Engine:
         self.current_noise = params.current_noise
         """The calibration's current-noise model; empty for a params file of the old
         equation-error form, which the filter then runs in its own units."""
+        self._hac_lag = round(self.window_s / dt) if self.current_noise else 0
+        """Samples the payload's scores are correlated over (the angles' smoothing
+        window): the lag of every pass's filter, and of the empty dipper's."""
         self.rls: PayloadRls | None = None
         """The pass's filter over its settled samples (the live estimate's)."""
         self.rls_all: PayloadRls | None = None
@@ -408,9 +419,8 @@ class Engine:
             out.extend(self._finish_empty(t))
         if ph == RETURN and self.rls is None and prev == DUMP and self.cfg.empty_warn_kg > 0:
             # the pass was weighed at its dump: the dipper is empty now
-            lag = round(self.window_s / self.dt) if self.current_noise else 0
-            self.rls_empty = PayloadRls(self.noise, self.dt * self._empty_every,
-                                        self.cfg.rls, hac_lag=lag // self._empty_every)
+            self.rls_empty = PayloadRls(self.noise, self.dt * self._empty_every, self.cfg.rls,
+                                        hac_lag=self._hac_lag // self._empty_every)
             self.return_start = t
             self._empty_tick = 0
             self.batch.clear()
@@ -420,9 +430,7 @@ class Engine:
             self.pass_index += 1
             self._cycle += 1
             self.pass_start = t
-            # the payload's scores are correlated over the angles' smoothing window
-            lag = round(self.window_s / self.dt) if self.current_noise else 0
-            self.rls = PayloadRls(self.noise, self.dt, self.cfg.rls, hac_lag=lag)
+            self.rls = PayloadRls(self.noise, self.dt, self.cfg.rls, hac_lag=self._hac_lag)
             self.rls_all = None
             self._rows = []
             self._early_rows = 0
@@ -461,7 +469,7 @@ class Engine:
         if len(checks) >= self.cfg.empty_returns and abs(med) > self.cfg.empty_warn_kg:
             self.empty_warned += 1
             k = self.empty_warned
-            if k in (1, 10) or k % 100 == 0:
+            if _now_and_then(k):
                 log.warning("the empty dipper weighs %+.0f kg on its returns (median of the "
                             "last %d; %s): material stays in the dipper, or the machine has "
                             "changed since its calibration (weigh a known load, calibrate "
@@ -520,7 +528,7 @@ class Engine:
         if misfit > self.cfg.misfit_warn:
             self.misfit_high += 1
             k = self.misfit_high
-            if k in (1, 10) or k % 100 == 0:  # a machine that misfits does so all shift
+            if _now_and_then(k):
                 log.warning("pass %d: misfit %.1f, the model's residuals %.1f times the "
                             "size the calibration's noise model gives them (%s): the model "
                             "may lack something this machine does (shoveld diagnose names "
