@@ -101,6 +101,16 @@ def _truck_word(t: dict[str, Any]) -> str:
     return status if t.get("closed") or status.startswith("over") else "loading"
 
 
+def _doubt(p: dict[str, Any]) -> str:
+    """A weighed pass the daemon marked ``misfit_high`` (the model did not fit it): its
+    weight may be off, which the cab says beside it ("" for the others)."""
+    if not (p.get("valid") and p.get("misfit_high")):
+        return ""
+    m = p.get("misfit")
+    return f"  ? model did not fit (misfit {m:.1f})" if isinstance(m, (int, float)) else \
+        "  ? model did not fit"
+
+
 def _kg(x: Any) -> str:
     return "     --" if x is None else f"{x:7.0f}"
 
@@ -158,7 +168,7 @@ class CabState:
                 val = (f"{msg['payload_kg']:.0f} kg +- {msg['std_kg']:.0f} kg" if msg.get("valid")
                        else f"INVALID ({msg.get('reason')})")
                 self.lines.append(f"{stamp} {shovel} pass {msg.get('pass')} truck "
-                                  f"{msg.get('truck')}: {val}")
+                                  f"{msg.get('truck')}: {val}{_doubt(msg)}")
             elif topic == "truck":
                 if msg.get("closed"):
                     v.closed.append(msg)
@@ -270,7 +280,7 @@ class CabState:
                         continue
                     if p.get("valid"):
                         out.append(f"    pass {i:2d}  {_kg(p.get('payload_kg'))} kg"
-                                   f"  +- {p.get('std_kg') or 0:5.0f} kg")
+                                   f"  +- {p.get('std_kg') or 0:5.0f} kg{_doubt(p)}")
                     else:
                         out.append(f"    pass {i:2d}  INVALID  {p.get('reason', '')}")
                 if v.closed:

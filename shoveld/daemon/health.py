@@ -111,6 +111,14 @@ def problems(drivers: Mapping[str, dict[str, Any]], loop: dict[str, Any],
     if loop.get("failing_now"):
         out.append(f"loop: the last {n_of(loop['failing_now'], 'tick', 'ticks')} failed "
                    "(see the log)")
+    empty = loop.get("empty_dipper")
+    if isinstance(empty, dict) and empty.get("beyond") and empty.get("median_kg") is not None:
+        # a calibration (or model) fault the passes may share, by less or more than the
+        # empty weight: the operator and the office see it as long as it lasts, the log
+        # says the causes (docs/engine.md, "The empty dipper on its returns")
+        out.append(f"payload: the empty dipper weighs {empty['median_kg'] / 1000:+.1f} t on "
+                   f"its returns (median of the last {empty.get('of_last')}): the calibration or "
+                   "the model is off, the passes may be too; weigh a known load")
     recent, ticks = loop.get("overruns_recent") or 0, loop.get("ticks_recent") or 0
     if recent and recent > 0.02 * max(ticks, 1):
         out.append(f"loop: {n_of(recent, 'overrun', 'overruns')} in the last "

@@ -32,7 +32,7 @@ from shoveld.daemon.publisher import Publisher
 from shoveld.daemon.store import ReadingStore
 from shoveld.engine.loop import Engine, LiveEstimate, PassResult, TruckResult
 from shoveld.model.params import ModelParams
-from shoveld.payload.misfit import round_misfit
+from shoveld.payload.misfit import misfit_high, round_misfit
 from shoveld.payload.trucks import Truck, rule_101020
 from shoveld.sample import Sample
 
@@ -458,18 +458,19 @@ class Service:
             if self.on_event:
                 self.on_event("truck", msg)
 
-    @staticmethod
-    def _pass_msg(p: dict[str, Any], start_u: float, end_u: float) -> dict[str, Any]:
-        return {"pass": p["pass"], "truck": p["truck"], "payload_kg": p["payload_kg"],
-                "std_kg": p["std_kg"], "start": round(start_u, 3), "end": round(end_u, 3),
-                "valid": bool(p["valid"]), "samples": p["samples"], "reason": p["reason"],
-                "misfit": p.get("misfit")}
+    def _pass_msg(self, p: dict[str, Any], start_u: float, end_u: float) -> dict[str, Any]:
+        return {**self._pass_msg_from_engine(p), "start": round(start_u, 3),
+                "end": round(end_u, 3)}
 
-    @staticmethod
-    def _pass_msg_from_engine(p: dict[str, Any]) -> dict[str, Any]:
+    def _pass_msg_from_engine(self, p: dict[str, Any]) -> dict[str, Any]:
+        """A pass as the screens get it. ``misfit_high``: the model did not fit it (above
+        this daemon's ``engine.misfit_warn``), so the screens mark its weight as doubtful
+        by the daemon's own level, not one of theirs."""
+        misfit = p.get("misfit")
         return {"pass": p["pass"], "truck": p["truck"], "payload_kg": p["payload_kg"],
                 "std_kg": p["std_kg"], "valid": bool(p["valid"]), "samples": p["samples"],
-                "reason": p.get("reason", ""), "misfit": p.get("misfit")}
+                "reason": p.get("reason", ""), "misfit": misfit,
+                "misfit_high": misfit_high(misfit, self.cfg.engine.misfit_warn)}
 
     def _truck_msg(self, tdict: dict[str, Any], closed: bool) -> dict[str, Any]:
         msg = {k: tdict[k] for k in ("truck", "passes", "total_kg", "std_kg", "target_kg",
@@ -524,6 +525,7 @@ class Service:
                 "warn_kg": e.cfg.empty_warn_kg, "returns": len(checks),
                 "last_kg": round(checks[-1], 1) if checks else None,
                 "median_kg": round(e.empty_median, 1) if checks else None,
+                "of_last": e.cfg.empty_returns, "beyond": e.empty_beyond,
                 "checks_beyond": e.empty_warned}
         zen = self.publisher.health()
         persist = {"passes_written": self.passes_written, "queue": self._q.qsize(),

@@ -287,6 +287,10 @@ class Engine:
         """Checks whose median was beyond ``empty_warn_kg``."""
         self.empty_median = math.nan
         """The median of ``empty_checks``."""
+        self.empty_beyond = False
+        """Whether the last check's median was beyond ``empty_warn_kg`` (with the
+        ``empty_returns`` checks it takes): the state health reports, cleared by a median
+        back within it."""
         self.pass_index = first_pass - 1
         self._cycle = 0
         """Dig cycles started: tags the lagged samples so none crosses into another cycle
@@ -466,7 +470,9 @@ class Engine:
         checks.append(kg)
         del checks[:-max(1, self.cfg.empty_returns)]
         med = self.empty_median = float(np.median(checks))
-        if len(checks) >= self.cfg.empty_returns and abs(med) > self.cfg.empty_warn_kg:
+        self.empty_beyond = (len(checks) >= self.cfg.empty_returns
+                             and abs(med) > self.cfg.empty_warn_kg)
+        if self.empty_beyond:
             self.empty_warned += 1
             k = self.empty_warned
             if _now_and_then(k):

@@ -50,6 +50,22 @@ def last_pass_hint(total_kg: float, target_kg: float, recent_kg: list[float]) ->
             "text": f"{n_of(left, 'pass', 'passes')} left, about {each / 1000:.1f} t each"}
 
 
+def doubtful_note(passes: list[dict[str, Any]]) -> str | None:
+    """What the cab says under this truck's passes when the model did not fit some of them
+    (the daemon marks them ``misfit_high``): weighed, and counted in the truck, but their
+    weights may be off. Passes are numbered within the truck, as the page lists them."""
+    marked = [(i, p.get("misfit")) for i, p in enumerate(passes, start=1)
+              if p.get("valid") and p.get("misfit_high")]
+    if not marked:
+        return None
+    if len(marked) == 1:
+        i, m = marked[0]
+        fit = f" (misfit {m:.1f})" if isinstance(m, (int, float)) else ""
+        return f"? pass {i}: the model did not fit it{fit}; its weight may be off"
+    numbers = ", ".join(str(i) for i, _ in marked[:-1]) + f" and {marked[-1][0]}"
+    return f"? passes {numbers}: the model did not fit them; their weights may be off"
+
+
 def truck_warning(truck: dict[str, Any] | None) -> dict[str, str] | None:
     """An over-load warning (or an under-load one once the truck is closed)."""
     if not truck:
@@ -173,6 +189,9 @@ class ScreenState(CabState):
             problems.insert(0, f"link: {self.link} {self.link_detail}".strip())
         shift = self._shift_closed(v.shovel, truck)
         is_open = bool(truck) and not truck.get("closed")
+        passes = [{k: p.get(k) for k in ("pass", "truck", "payload_kg", "std_kg", "valid",
+                                          "reason", "end", "misfit", "misfit_high")}
+                  for p in v.passes if not truck or p.get("truck") == truck.get("truck")]
         return {
             "shovel": v.shovel, "alive": v.alive and not silent, "silent": silent,
             "age_s": None if age is None else round(age, 1),
@@ -187,9 +206,8 @@ class ScreenState(CabState):
                      {"kind": "closed", "text": f"Truck {truck.get('truck')} sent off: "
                       "waiting for the next truck"} if truck.get("closed") else None),
             "warning": truck_warning(truck),
-            "passes": [{k: p.get(k) for k in ("pass", "truck", "payload_kg", "std_kg",
-                                               "valid", "reason", "end")}
-                       for p in v.passes if not truck or p.get("truck") == truck.get("truck")],
+            "passes": passes,
+            "doubt": doubtful_note(passes),
             "closed": [{k: c.get(k) for k in ("truck", "passes", "total_kg", "target_kg",
                                                "fill_pct", "status")}
                        for c in v.closed[-5:]][::-1],

@@ -47,6 +47,14 @@ def test_screen_shows_live_passes_truck_and_problems() -> None:
     # passes numbered within the truck, not over the shift
     assert "pass  1    30000 kg" in screen and "pass  2  INVALID" in screen
     assert "! laser: babbling" in screen
+    assert "model did not fit" not in screen
+    # a pass the daemon marks as not fitted by the model: weighed, and marked in both views
+    state.on_message("s7", "pass", {"pass": 13, "truck": 4, "payload_kg": 28000.0,
+                                    "std_kg": 300.0, "valid": True, "misfit": 6.24,
+                                    "misfit_high": True, "end": T})
+    assert "pass  3    28000 kg  +-   300 kg  ? model did not fit (misfit 6.2)" in state.screen()
+    assert state.take_lines()[-1].endswith(
+        "pass 13 truck 4: 28000 kg +- 300 kg  ? model did not fit (misfit 6.2)")
     state.on_message("s7", "payload/live", {"time": T, "payload_kg": None, "std_kg": None,
                                             "phase": "dump", "valid": False})
     assert "no valid estimate" in state.screen()

@@ -15,6 +15,9 @@ from shoveld.engine.offline import estimate_table
 from shoveld.model.params import ModelParams
 from shoveld.replay.table import Fault, table_service
 from shoveld.signals.table import SignalsTable
+from shoveld.sim.machine import Machine
+from shoveld.web.state import ScreenState
+from tests.engine.test_empty_check import calibrated_machine, cycles
 
 from .conftest import Collector, free_port, make_cfg
 
@@ -93,6 +96,8 @@ def test_table_through_the_service_to_zenoh(tmp_path: Path, e2e_table: SignalsTa
     misfits = [m["misfit"] for m in passes]
     assert fit["warn"] == 3.0 and all(0.0 < m < 10.0 for m in misfits)
     assert svc.engine.misfit_high == sum(m > 3.0 for m in misfits)
+    # the screens mark a pass by the daemon's level (engine.misfit_warn), from the message
+    assert [m["misfit_high"] for m in passes] == [m > 3.0 for m in misfits]
     assert fit["passes_above"] <= svc.engine.misfit_high
     assert svc.last_pass is not None and svc.last_pass["misfit"] == misfits[-1]
     assert round(svc.engine.last_misfit, 2) == misfits[-1]
@@ -103,6 +108,8 @@ def test_table_through_the_service_to_zenoh(tmp_path: Path, e2e_table: SignalsTa
     empty = h["loop"]["empty_dipper"]
     assert len(svc.engine.empty_checks) == 2 and svc.engine.empty_warned == 0
     assert empty["warn_kg"] == 500.0 and empty["returns"] <= 2 and empty["checks_beyond"] == 0
+    assert empty["of_last"] == 5 and empty["beyond"] is False
+    assert not any("empty dipper" in p for p in h["problems"])
     assert empty["last_kg"] in {None, *(round(kg, 1) for kg in svc.engine.empty_checks)}
     st = replies[0].ok
     assert str(st.encoding) == "application/json"
@@ -265,3 +272,50 @@ def test_flush_says_when_the_pass_log_did_not_catch_up(tmp_path: Path,
     t0 = time.monotonic()
     assert not svc.flush(timeout_s=0.1)
     assert 0.09 <= time.monotonic() - t0 < 5.0
+
+
+@pytest.fixture(scope="module")
+def machine_and_params() -> tuple[Machine, ModelParams]:
+    return calibrated_machine()
+
+
+@pytest.mark.parametrize("dipper", [1.0, 1.05])
+def test_an_empty_dipper_weighed_heavy_on_the_returns_is_a_problem_health_names(
+        tmp_path: Path, machine_and_params: tuple[Machine, ModelParams], dipper: float) -> None:
+    """A dipper rebuilt 5 % heavier than at the calibration weighs every pass heavy, and no
+    pass's fit says so: the returns do, and health carries it, so that the cab and the
+    office see it for as long as it lasts (a log line alone reaches nobody in the cab).
+    The machine as calibrated says nothing of the kind. The level of the marks follows the
+    daemon's config: at ``misfit_warn = 0`` every weighed pass is marked."""
+    machine, params = machine_and_params
+    table = cycles(machine, dipper=dipper, passes=7).table
+    cfg = make_cfg(tmp_path, engine={"misfit_warn": 0.0})
+    got: list[dict[str, Any]] = []
+    svc, feed = table_service(table, cfg, params, close_truck_at_end=True)
+    svc.on_event = lambda k, m: got.append({"topic": k, **m})
+    svc.start()
+    try:
+        svc.run(threading.Event(), done=lambda: feed.finished)
+        svc.flush()
+        svc._publish_health(svc.clock.now())
+        health, status = svc.health_msg, svc.status()
+    finally:
+        svc.close()
+    passes = [m for m in got if m["topic"] == "pass"]
+    assert len(passes) == 7 and all(m["misfit_high"] == m["valid"] for m in passes)
+    empty = health["loop"]["empty_dipper"]
+    said = [p for p in health["problems"] if "empty dipper" in p]
+    if dipper == 1.0:
+        assert empty["returns"] == 5 and not empty["beyond"] and said == []
+        return
+    assert empty["returns"] == 5 and empty["beyond"] and empty["median_kg"] > 1000.0
+    assert said == [f"payload: the empty dipper weighs {empty['median_kg'] / 1000:+.1f} t on its "
+                    "returns (median of the last 5): the calibration or the model is off, the "
+                    "passes may be too; weigh a known load"]
+    assert health["ok"] is False and said[0] in status["problems"]
+    # and the cab shows it, with the passes marked as the daemon marked them
+    screen = ScreenState()
+    screen.on_status("t1", status)
+    snap = screen.snapshot()["shovels"][0]
+    assert said[0] in snap["problems"]
+    assert snap["doubt"] is not None and snap["doubt"].startswith("? passes ")

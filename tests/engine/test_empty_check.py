@@ -27,6 +27,11 @@ PASSES = 10
 
 @pytest.fixture(scope="module")
 def machine_and_params() -> tuple[Machine, ModelParams]:
+    return calibrated_machine()
+
+
+def calibrated_machine() -> tuple[Machine, ModelParams]:
+    """A realistic machine, and its params from its own two trials."""
     machine = Machine.draw(SEED)
     trials = [simulate_calibration(kg, SEED + k, machine=machine).table
               for k, kg in ((1, 0.0), (2, 8420.0))]
@@ -35,10 +40,10 @@ def machine_and_params() -> tuple[Machine, ModelParams]:
     return machine, params
 
 
-def cycles(machine: Machine, dipper: float = 1.0) -> SimResult:
+def cycles(machine: Machine, dipper: float = 1.0, passes: int = PASSES) -> SimResult:
     """Passes on the machine, its dipper's mass times ``dipper``."""
     plant = dataclasses.replace(machine.plant, Md=machine.plant.Md * dipper)
-    return simulate_cycles(PASSES, SEED + 3, machine=dataclasses.replace(machine, plant=plant),
+    return simulate_cycles(passes, SEED + 3, machine=dataclasses.replace(machine, plant=plant),
                            payload_range=(3000.0, 35000.0), truck_target_kg=None)
 
 

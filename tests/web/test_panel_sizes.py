@@ -102,7 +102,8 @@ def test_what_the_operator_reads_is_on_the_first_screen(screen: ThreadedScreen, 
 @pytest.fixture(scope="module")
 def full_screen() -> Iterator[ThreadedScreen]:
     """A shift's worth on the screen: five closed trucks, five passes in an over-loaded
-    truck with its hint and warning, the arm, a missing sensor in the health strip."""
+    truck with its hint and warning, one of them marked as not fitted by the model, the
+    arm, a missing sensor and a miscalibrated dipper in the health strip."""
     st = ScreenState()
     st.set_link("up", "test")
     st.on_alive("s1", True)
@@ -121,7 +122,8 @@ def full_screen() -> Iterator[ThreadedScreen]:
     for i, p in enumerate(loads):
         n += 1
         st.on_message("s1", "pass", {"pass": n, "truck": 6, "payload_kg": p,
-                                     "std_kg": 300.0, "valid": True})
+                                     "std_kg": 300.0, "valid": True, "misfit": 6.24 - 5 * (i != 3),
+                                     "misfit_high": i == 3})
         total = sum(loads[:i + 1])
         st.on_message("s1", "truck", {"truck": 6, "passes": i + 1, "total_kg": total,
                                       "target_kg": 136000.0,
@@ -129,7 +131,10 @@ def full_screen() -> Iterator[ThreadedScreen]:
                                       "status": "over_110" if total > 149600 else "under"})
     st.on_message("s1", "joints", {"handle_deg": 18.0, "crowd_m": 9.1, "boom_deg": 45.0,
                                    "swing_deg": 82.0, "invalid": []})
-    st.on_message("s1", "health", {"problems": ["laser: no reading for 3.0 s"], "ok": False})
+    st.on_message("s1", "health", {"problems": [
+        "laser: no reading for 3.0 s",
+        "payload: the empty dipper weighs +1.6 t on its returns (median of the last 5): the "
+        "calibration or the model is off, the passes may be too; weigh a known load"], "ok": False})
     yield from served(st, ["s1"])
 
 
@@ -151,8 +156,8 @@ def test_a_ten_inch_panel_shows_the_whole_cab_page_without_scrolling(
             "return [innerWidth, innerHeight, d.scrollWidth, d.scrollHeight]")
         assert scroll_w <= inner_w and scroll_h <= inner_h, (width, height, scroll_w, scroll_h)
         boxes = b.execute_script(
-            "return ['payload', 'gauge', 'warning', 'passes', 'trucks', 'shift', 'arm', "
-            "'joints', 'health'].map(id => { const e = document.getElementById(id);"
+            "return ['payload', 'gauge', 'warning', 'passes', 'doubt', 'trucks', 'shift', "
+            "'arm', 'joints', 'health'].map(id => { const e = document.getElementById(id);"
             "const r = e.getBoundingClientRect(); let p = e.parentElement, cut = false;"
             "while (p) { const q = p.getBoundingClientRect();"
             " if (getComputedStyle(p).overflowY !== 'visible' &&"
@@ -165,6 +170,14 @@ def test_a_ten_inch_panel_shows_the_whole_cab_page_without_scrolling(
         rows = b.execute_script("return document.querySelectorAll('#trucks tr').length")
         assert rows == 5
         assert b.find_element("id", "warning").text.startswith("Over 110 %")
+        # the pass the model did not fit is marked, and the note under the list says why
+        marked = b.execute_script(
+            "return Array.from(document.querySelectorAll('#passes tr.doubtful-pass'))"
+            ".map(r => r.textContent)")
+        assert marked == ["434.9 ?0.3"], marked
+        assert b.find_element("id", "doubt").text == (
+            "? pass 4: the model did not fit it (misfit 6.2); its weight may be off")
+        assert "empty dipper weighs +1.6 t" in b.find_element("id", "health").text
     finally:
         b.quit()
 

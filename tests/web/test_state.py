@@ -4,7 +4,13 @@ from __future__ import annotations
 
 import pytest
 
-from shoveld.web.state import SILENT_AFTER_S, ScreenState, last_pass_hint, truck_warning
+from shoveld.web.state import (
+    SILENT_AFTER_S,
+    ScreenState,
+    doubtful_note,
+    last_pass_hint,
+    truck_warning,
+)
 
 
 def test_last_pass_hint_tops_off_without_passing_110_percent() -> None:
@@ -75,3 +81,35 @@ def test_the_shift_comes_from_the_daemons_pass_log_when_it_says_so() -> None:
                                   "shift": {"trucks": 9, "passes": 41, "kg": 1_180_000.0}})
     assert st.snapshot()["shovels"][0]["shift"] == {"trucks": 9, "passes": 41,
                                                     "kg": 1_180_000.0}
+
+
+def test_passes_the_model_did_not_fit_are_marked_by_the_daemons_word() -> None:
+    """The daemon marks a pass ``misfit_high`` by its own level; the cab marks that pass
+    and says why under the list, numbered within the truck as the list is. A pass not
+    weighed is not marked (it says why already), nor one from a daemon that sends no mark."""
+    st = ScreenState()
+    st.on_alive("s1", True)
+    st.on_message("s1", "truck", {"truck": 2, "passes": 0, "total_kg": 0.0,
+                                  "target_kg": 136000.0, "fill_pct": 0.0, "status": "under"})
+    marks = [(False, 0.8), (True, 6.24), (False, None), (True, 41.0), (False, 3.5)]
+    for k, (high, misfit) in enumerate(marks):
+        st.on_message("s1", "pass", {"pass": 20 + k, "truck": 2, "payload_kg": 30000.0,
+                                     "std_kg": 200.0, "valid": k != 3, "misfit": misfit,
+                                     "misfit_high": high, "reason": "" if k != 3 else "x"})
+    snap = st.snapshot()["shovels"][0]
+    assert [p["misfit_high"] for p in snap["passes"]] == [m for m, _ in marks]
+    # pass 4 of the truck was not weighed: only pass 2 is doubtful
+    assert snap["doubt"] == "? pass 2: the model did not fit it (misfit 6.2); its weight may be off"
+    st.on_message("s1", "pass", {"pass": 25, "truck": 2, "payload_kg": 31000.0,
+                                 "std_kg": 200.0, "valid": True, "misfit": 9.0,
+                                 "misfit_high": True})
+    assert st.snapshot()["shovels"][0]["doubt"] == (
+        "? passes 2 and 6: the model did not fit them; their weights may be off")
+    # a daemon older than the mark sends misfit alone: the screen does not judge it
+    assert doubtful_note([{"valid": True, "misfit": 50.0}]) is None
+    assert doubtful_note([{"valid": True, "misfit_high": True}]) == (
+        "? pass 1: the model did not fit it; its weight may be off")
+    # the next truck starts clean
+    st.on_message("s1", "truck", {"truck": 3, "passes": 0, "total_kg": 0.0,
+                                  "target_kg": 136000.0, "fill_pct": 0.0, "status": "under"})
+    assert st.snapshot()["shovels"][0]["doubt"] is None

@@ -59,10 +59,11 @@ function render(snap) {
   w.className = s.warning ? s.warning.level : "";
   $("passes").innerHTML = s.passes.map((q, i) => {
     if (!(q.pass in screen.shown)) screen.shown[q.pass] = Date.now();
-    return q.valid
-      ? `<tr><td>${i + 1}</td><td>${(q.payload_kg / 1000).toFixed(1)}</td><td>${(q.std_kg / 1000).toFixed(1)}</td></tr>`
-      : `<tr class="invalid-pass"><td>${i + 1}</td><td colspan="2">not weighed: ${screen.esc(q.reason)}</td></tr>`;
+    if (!q.valid) return `<tr class="invalid-pass"><td>${i + 1}</td><td colspan="2">not weighed: ${screen.esc(q.reason)}</td></tr>`;
+    const doubt = q.misfit_high ? " ?" : "";
+    return `<tr${doubt ? ' class="doubtful-pass"' : ""}><td>${i + 1}</td><td>${(q.payload_kg / 1000).toFixed(1)}${doubt}</td><td>${(q.std_kg / 1000).toFixed(1)}</td></tr>`;
   }).join("");
+  $("doubt").textContent = s.doubt || "";
   $("trucks").innerHTML = s.closed.map(c =>
     `<tr><td>${c.truck}</td><td>${c.passes}</td><td>${(c.total_kg / 1000).toFixed(1)}</td><td>${c.fill_pct} %</td><td>${screen.esc(c.status)}</td></tr>`).join("");
   const r = s.rule;
