@@ -17,7 +17,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Writes DIR/index.html (one file a supervisor opens in any browser) and "
                     "the tables as CSV: tonnes per hour, trucks against target and the "
                     "10/10/20 rule, pass payloads and truck fill, cycle times, passes not "
-                    "weighed and why.")
+                    "weighed and why, passes the model did not fit, and the empty dipper "
+                    "weighed on the returns.")
     add_log_window(p)
     p.add_argument("--out", required=True, metavar="DIR", help="folder to write (created)")
     p.add_argument("--title", default="Shift report")
@@ -26,11 +27,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from shoveld.cli.passes import read_window
+    from shoveld.daemon.persist import read_empties
     from shoveld.report.figures import shift_figures
     from shoveld.report.write import write_report
 
-    rows, _, since, until = read_window(args)
-    figures = shift_figures(rows, since, until)
+    rows, path, since, until = read_window(args)
+    figures = shift_figures(rows, since, until, empties=read_empties(path, since, until))
     try:
         page = write_report(figures, Path(args.out), args.title)
     except OSError as e:

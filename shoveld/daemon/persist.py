@@ -19,9 +19,11 @@ from typing import Any
 
 log = logging.getLogger(__name__)
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 """2 (2026-11-29): the passes' ``misfit``; a version-1 log gains the column when the
-daemon opens it (its passes keep NULL there), in one transaction."""
+daemon opens it (its passes keep NULL there), in one transaction. 3 (2026-11-29, the
+thirty-first session): the table ``empties``, the empty dipper weighed on each return;
+an older log gains it (empty) when the daemon opens it."""
 DB_NAME = "passes.sqlite"
 
 _SCHEMA = """
@@ -49,6 +51,18 @@ CREATE TABLE IF NOT EXISTS trucks (
     opened_unix REAL NOT NULL,
     closed_unix REAL
 );
+CREATE TABLE IF NOT EXISTS empties (
+    after_pass INTEGER PRIMARY KEY,
+    shovel TEXT NOT NULL,
+    end_unix REAL NOT NULL,
+    payload_kg REAL NOT NULL,
+    std_kg REAL NOT NULL,
+    samples INTEGER NOT NULL,
+    median_kg REAL NOT NULL,
+    beyond INTEGER NOT NULL,
+    warn_kg REAL NOT NULL
+);
+CREATE INDEX IF NOT EXISTS empties_end ON empties(end_unix);
 """
 
 
@@ -119,6 +133,9 @@ def connect(path: str | Path, readonly: bool = False, durable: bool = True
         con.executescript("BEGIN IMMEDIATE; ALTER TABLE passes ADD COLUMN misfit REAL; "
                           f"UPDATE meta SET value = '{SCHEMA_VERSION}' WHERE key = 'schema'; "
                           "COMMIT;")
+    # a version-2 log has its new table from the schema above: say so in its version
+    con.execute("UPDATE meta SET value = ? WHERE key = 'schema' AND CAST(value AS INTEGER) < ?",
+                (str(SCHEMA_VERSION), SCHEMA_VERSION))
     return con
 
 
@@ -207,6 +224,19 @@ class PassLog:
         self.writes += 1
         return True
 
+    def write_empty(self, e: dict[str, Any], end_unix: float, warn_kg: float,
+                    beyond: bool) -> bool:
+        """Commit one return's empty-dipper check (``EmptyCheck.as_dict``), with the level
+        the daemon held it to and whether the median was beyond it then; False if the
+        check after that pass is there already."""
+        c = self.con
+        cur = c.execute("INSERT OR IGNORE INTO empties(after_pass, shovel, end_unix, payload_kg, "
+                        "std_kg, samples, median_kg, beyond, warn_kg) "
+                        "VALUES (?,?,?,?,?,?,?,?,?)",
+                        (e["after_pass"], self.shovel, end_unix, e["payload_kg"], e["std_kg"],
+                         e["samples"], e["median_kg"], int(beyond), warn_kg))
+        return cur.rowcount == 1
+
     def close_truck(self, truck: int, target_kg: float, closed_unix: float) -> None:
         c = self.con
         c.execute("BEGIN IMMEDIATE")
@@ -258,6 +288,34 @@ def read_passes(path: str | Path, since_unix: float | None = None,
         target, closed = trucks.get(int(d["truck"]), (None, None))
         d["truck_target_kg"] = target
         d["truck_closed"] = closed is not None
+        out.append(d)
+    return out
+
+
+EMPTY_COLUMNS = ("after_pass", "shovel", "end", "payload_kg", "std_kg", "samples",
+                 "median_kg", "beyond", "warn_kg")
+
+
+def read_empties(path: str | Path, since_unix: float | None = None,
+                 until_unix: float | None = None) -> list[dict[str, Any]] | None:
+    """The empty-dipper checks that ended in [since, until), oldest first; None for a pass
+    log that records none (written before schema 3, and not opened by a daemon since)."""
+    con = connect(path, readonly=True)
+    try:
+        if not con.execute("SELECT 1 FROM sqlite_master WHERE name = 'empties'").fetchone():
+            return None
+        rows = con.execute(
+            "SELECT after_pass, shovel, end_unix, payload_kg, std_kg, samples, median_kg, "
+            "beyond, warn_kg FROM empties WHERE end_unix >= ? AND end_unix < ? "
+            "ORDER BY end_unix",
+            (since_unix if since_unix is not None else -1e18,
+             until_unix if until_unix is not None else 1e18)).fetchall()
+    finally:
+        con.close()
+    out = []
+    for r in rows:
+        d = dict(zip(EMPTY_COLUMNS, r, strict=True))
+        d["beyond"] = bool(d["beyond"])
         out.append(d)
     return out
 

@@ -30,7 +30,7 @@ from shoveld.daemon.notify import Notifier
 from shoveld.daemon.persist import PassLog, db_path
 from shoveld.daemon.publisher import Publisher
 from shoveld.daemon.store import ReadingStore
-from shoveld.engine.loop import Engine, LiveEstimate, PassResult, TruckResult
+from shoveld.engine.loop import EmptyCheck, Engine, LiveEstimate, PassResult, TruckResult
 from shoveld.model.params import ModelParams
 from shoveld.payload.misfit import misfit_high, round_misfit
 from shoveld.payload.trucks import Truck, rule_101020
@@ -388,6 +388,8 @@ class Service:
             self._q.put(("truck", ev.truck.as_dict(), ev.closed, wall(t)))
             if ev.closed and engine.truck is not ev.truck:
                 self._q.put(("truck", engine.truck.as_dict(), False, wall(t)))
+        elif isinstance(ev, EmptyCheck):
+            self._q.put(("empty", ev.as_dict(), wall(ev.end_s), engine.empty_beyond))
 
     # -- pass log thread -------------------------------------------------------------------------
     def _persist_loop(self) -> None:
@@ -440,6 +442,10 @@ class Service:
             self.publisher.put("pass", msg)
             if self.on_event:
                 self.on_event("pass", msg)
+        elif item[0] == "empty":
+            # a check, not a weight: one try, and a failure is said (persist_error) as any
+            _, e, end_u, beyond = item
+            self.passlog.write_empty(e, end_u, self.cfg.engine.empty_warn_kg, beyond)
         else:
             _, tdict, closed, wall_t = item
             if closed:

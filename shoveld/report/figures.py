@@ -46,6 +46,15 @@ class ShiftFigures:
     """The recorded misfits (a pass log written before 2026-11-29 has none)."""
     misfit_high: list[dict[str, Any]] = field(default_factory=list)
     """Passes whose misfit is above ``MISFIT_WARN``: the model did not fit them."""
+    empties: list[dict[str, Any]] | None = None
+    """The empty dipper weighed on the returns (``persist.read_empties``); None: the pass
+    log records none (written before 2026-11-29's schema 3)."""
+
+    @property
+    def empty_beyond(self) -> list[dict[str, Any]]:
+        """The checks after which the daemon held the median of the last returns beyond
+        its level (it said so on health while it lasted)."""
+        return [e for e in self.empties or [] if e["beyond"]]
 
     @property
     def valid_kg(self) -> list[float]:
@@ -58,13 +67,14 @@ class ShiftFigures:
 
 
 def shift_figures(rows: list[dict[str, Any]], since: float | None = None,
-                  until: float | None = None) -> ShiftFigures:
+                  until: float | None = None,
+                  empties: list[dict[str, Any]] | None = None) -> ShiftFigures:
     """Trucks against their targets, the 10/10/20 rule over the closed ones, tonnes per
-    hour, cycle times and invalid passes."""
+    hour, cycle times and invalid passes; the misfits, and the empty-dipper checks."""
     ends = [float(r["end"]) for r in rows]
     since = min(ends) if since is None and ends else (since or 0.0)
     until = max(ends) if until is None and ends else (until or 0.0)
-    f = ShiftFigures(since, until, rows)
+    f = ShiftFigures(since, until, rows, empties=empties)
     by_truck: dict[int, Truck] = {}
     closed: dict[int, bool] = {}
     for r in rows:

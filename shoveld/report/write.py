@@ -64,6 +64,27 @@ def _plots(f: ShiftFigures) -> dict[str, bytes]:
         ax.set_ylabel("trucks")
         ax.set_title("Truck fill (closed trucks)")
         save("truck_fill", fig)
+    if f.empties:
+        fig, ax = plt.subplots(figsize=(8, 3.6))
+        when = [dt.datetime.fromtimestamp(e["end"]).astimezone() for e in f.empties]
+        ax.errorbar(when, [e["payload_kg"] for e in f.empties],
+                    yerr=[e["std_kg"] for e in f.empties], fmt="o", markersize=3,
+                    color="#2b6cb0", ecolor="#9bb8d8", label="each return")
+        ax.plot(when, [e["median_kg"] for e in f.empties], color="black",
+                label="median of the last returns")
+        warn = max(e["warn_kg"] for e in f.empties)
+        for y in (warn, -warn):
+            ax.axhline(y, color="#c40000", linestyle="--", linewidth=1.5)
+        ax.axhline(0.0, color="#888888", linewidth=0.8)
+        ax.set_ylabel("empty dipper (kg)")
+        ax.set_title(f"The empty dipper on the returns (level ±{warn:.0f} kg)")
+        ax.legend(loc="best", fontsize=10)
+        from matplotlib.dates import DateFormatter
+
+        ax.xaxis.set_major_formatter(DateFormatter("%H:%M", tz=when[0].tzinfo))
+        ax.set_xlabel("end of the return (local time)")
+        fig.autofmt_xdate()
+        save("empty_dipper", fig)
     if f.cycle_s:
         fig, ax = plt.subplots(figsize=(6, 3.6))
         ax.hist(f.cycle_s, bins=20, color="#2b6cb0")
@@ -92,6 +113,15 @@ def write_csv(f: ShiftFigures, out: Path) -> None:
         for t in f.trucks:
             w.writerow([t["truck"], t["passes"], t["invalid_passes"], f"{t['total_kg']:.1f}",
                         f"{t['target_kg']:.1f}", t["fill_pct"], t["status"], int(t["closed"])])
+    if f.empties is not None:
+        with open(out / "empties.csv", "w", newline="", encoding="utf-8") as fh:
+            w = csv.writer(fh)
+            w.writerow(["after_pass", "shovel", "end", "empty_kg", "std_kg", "samples",
+                        "median_kg", "beyond", "warn_kg"])
+            for e in f.empties:
+                w.writerow([e["after_pass"], e["shovel"], _when(e["end"]),
+                            f"{e['payload_kg']:.1f}", f"{e['std_kg']:.1f}", e["samples"],
+                            f"{e['median_kg']:.1f}", int(e["beyond"]), f"{e['warn_kg']:.0f}"])
     with open(out / "hours.csv", "w", newline="", encoding="utf-8") as fh:
         w = csv.writer(fh)
         w.writerow(["hour", "tonnes", "passes"])
@@ -169,8 +199,11 @@ def write_report(f: ShiftFigures, out: Path, title: str = "Shift report") -> Pat
     else:
         lines.append("<p>None.</p>")
     lines += _misfit_section(f)
+    lines += _empty_section(f, plots.get("empty_dipper"))
     lines.append("<p>Tables: <a href='passes.csv'>passes.csv</a>, <a href='trucks.csv'>"
-                 "trucks.csv</a>, <a href='hours.csv'>hours.csv</a>.</p></body></html>")
+                 "trucks.csv</a>, <a href='hours.csv'>hours.csv</a>"
+                 + (", <a href='empties.csv'>empties.csv</a>" if f.empties is not None else "")
+                 + ".</p></body></html>")
     page = out / "index.html"
     page.write_text("\n".join(lines), encoding="utf-8")
     return page
@@ -209,4 +242,46 @@ def _misfit_section(f: ShiftFigures) -> list[str]:
         out.append(f"<tr><td>{p['pass']}</td><td>{p['truck']}</td><td>{_when(p['end'])}</td>"
                    f"<td>{weighed}</td><td>{float(p['misfit']):.1f}</td></tr>")
     out.append("</table>")
+    return out
+
+
+def _empty_section(f: ShiftFigures, png: bytes | None) -> list[str]:
+    """The empty dipper weighed on each return: zero while the calibration fits the
+    machine and nothing stays in the dipper. For the engineer who calibrates the meter,
+    the check of the weight that the misfit is not (a dipper rebuilt heavier shows here,
+    not there), and its trend over the shift."""
+    out = ["<h2>The empty dipper on the returns</h2>"]
+    if f.empties is None:
+        out.append("<p>The pass log records no empty-dipper checks (written before "
+                   "2026-11-29's schema 3).</p>")
+        return out
+    if not f.empties:
+        out.append("<p>No return was weighed in this period.</p>")
+        return out
+    kg = sorted(e["payload_kg"] for e in f.empties)
+    last = f.empties[-1]
+    warn = last["warn_kg"]
+    out.append(f"<p>The daemon weighs the empty dipper on each return after a dump, with "
+               f"the passes' equations; it checks, it corrects nothing. "
+               f"{n_of(len(kg), 'return', 'returns')}: median {kg[len(kg) // 2]:+.0f} kg, "
+               f"from {kg[0]:+.0f} to {kg[-1]:+.0f} kg; the median of the last returns at "
+               f"the end {last['median_kg']:+.0f} kg, against the daemon's level of "
+               f"±{warn:.0f} kg.</p>")
+    beyond = f.empty_beyond
+    if not beyond:
+        out.append(f"<p id='empty'>The median of the last returns stayed within "
+                   f"±{warn:.0f} kg.</p>")
+    else:
+        first = beyond[0]
+        out.append(f"<p id='empty' class='bad'>The median of the last returns was beyond "
+                   f"the level at {n_of(len(beyond), 'return', 'returns')}, the first ending "
+                   f"{_when(first['end'])} (median {first['median_kg']:+.0f} kg): material "
+                   "stays in the dipper, or the machine has changed since its calibration "
+                   "(weigh a known load, calibrate again), or the model lacks something the "
+                   "machine does in its fast returns (<code>shoveld diagnose</code>). The "
+                   "passes may be off too, by less or more than the empty weight.</p>")
+    if png is not None:
+        b64 = base64.b64encode(png).decode()
+        out.append(f"<img alt='the empty dipper on the returns' "
+                   f"src='data:image/png;base64,{b64}'>")
     return out

@@ -12,7 +12,14 @@ import pytest
 
 from shoveld.cli import main
 from shoveld.cli.passes import parse_when
-from shoveld.daemon.persist import PassLog, db_path, read_passes
+from shoveld.daemon.persist import (
+    SCHEMA_VERSION,
+    PassLog,
+    audit_log,
+    db_path,
+    read_empties,
+    read_passes,
+)
 
 
 def p(n: int, truck: int, kg: float = 30000.0, valid: bool = True) -> dict[str, Any]:
@@ -232,14 +239,53 @@ def test_a_pass_log_of_schema_1_is_read_as_it_is_and_gains_the_misfit_when_the_d
     assert [(r["pass"], r["payload_kg"], r["misfit"]) for r in rows] == [(1, 30000.0, None)]
     cols = [r[1] for r in sqlite3.connect(path).execute("PRAGMA table_info(passes)")]
     assert "misfit" not in cols
+    assert read_empties(path) is None  # no empty-dipper checks recorded, and none made up
     # the daemon's pass log adds the column, keeps the pass and its truck
     log = PassLog(path, "s1")
     r = log.restore()
     assert r.next_pass == 2 and r.truck == 1
     assert [(x["pass"], x["payload_kg"], x["misfit"]) for x in r.truck_passes] == [
         (1, 30000.0, None)]
-    assert log.con.execute("SELECT value FROM meta WHERE key = 'schema'").fetchone()[0] == "2"
+    assert log.con.execute("SELECT value FROM meta WHERE key = 'schema'").fetchone()[0] == (
+        str(SCHEMA_VERSION))
+    assert read_empties(path) == []
     assert log.write_pass({**p(2, 1), "misfit": 0.77}, T0 + 20, T0 + 28, 62000.0)
     log.close()
     assert [(r["pass"], r["misfit"]) for r in read_passes(path)] == [(1, None), (2, 0.77)]
     assert PassLog(path, "s1").restore().next_pass == 3  # opened again: nothing to add
+
+
+def test_the_empty_dipper_checks_are_kept_with_the_level_they_were_held_to(
+        tmp_path: Path) -> None:
+    """Each return's check is committed once (the pass it followed is its key), with the
+    daemon's level and its verdict then; a log of schema 2 gains the table, empty, and
+    its version, when the daemon opens it, and a reader of it before then gets None."""
+    path = db_path(tmp_path)
+    log = PassLog(path, "s1")
+    for n in (1, 2, 3):
+        assert log.write_pass(p(n, 1), T0 + 30 * n, T0 + 30 * n + 8, 62000.0)
+    checks = [(1, 120.4, 120.4, False), (2, 1650.2, 885.3, False), (3, 1702.9, 1650.2, True)]
+    for after, kg, med, beyond in checks:
+        e = {"after_pass": after, "end_s": 30.0 * after + 14, "payload_kg": kg, "std_kg": 95.0,
+             "samples": 100, "median_kg": med}
+        assert log.write_empty(e, T0 + 30 * after + 14, 500.0, beyond)
+    assert not log.write_empty({**e, "payload_kg": 0.0}, T0 + 200, 500.0, False)  # once
+    log.close()
+    got = read_empties(path)
+    assert got is not None
+    assert [(e["after_pass"], e["payload_kg"], e["median_kg"], e["beyond"], e["warn_kg"],
+             e["shovel"]) for e in got] == [(a, kg, med, b, 500.0, "s1")
+                                           for a, kg, med, b in checks]
+    assert [e["after_pass"] for e in read_empties(path, T0 + 70, T0 + 90) or []] == [2]
+    assert not audit_log(path).problems
+    # a log of schema 2: no such table, read as it is, then opened by a daemon
+    con = sqlite3.connect(path)
+    con.executescript("DROP TABLE empties; UPDATE meta SET value = '2' WHERE key = 'schema';")
+    con.close()
+    assert read_empties(path) is None
+    log = PassLog(path, "s1")
+    assert log.con.execute("SELECT value FROM meta WHERE key = 'schema'").fetchone()[0] == (
+        str(SCHEMA_VERSION))
+    assert log.restore().next_pass == 4
+    log.close()
+    assert read_empties(path) == []

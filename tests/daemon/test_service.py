@@ -10,6 +10,7 @@ from typing import Any
 
 import pytest
 
+from shoveld.daemon.persist import db_path, read_empties
 from shoveld.engine.loop import EngineConfig
 from shoveld.engine.offline import estimate_table
 from shoveld.model.params import ModelParams
@@ -305,8 +306,14 @@ def test_an_empty_dipper_weighed_heavy_on_the_returns_is_a_problem_health_names(
     assert len(passes) == 7 and all(m["misfit_high"] == m["valid"] for m in passes)
     empty = health["loop"]["empty_dipper"]
     said = [p for p in health["problems"] if "empty dipper" in p]
+    # every return's check is in the pass log, with the daemon's verdict at the time
+    kept = read_empties(db_path(cfg.state_dir))
+    assert kept is not None and [e["after_pass"] for e in kept] == [1, 2, 3, 4, 5, 6]
+    assert [e["beyond"] for e in kept] == [False] * 4 + [dipper > 1.0] * 2
+    assert kept[-1]["median_kg"] == empty["median_kg"] and kept[-1]["warn_kg"] == 500.0
     if dipper == 1.0:
         assert empty["returns"] == 5 and not empty["beyond"] and said == []
+        assert all(abs(e["payload_kg"]) < 500.0 for e in kept)
         return
     assert empty["returns"] == 5 and empty["beyond"] and empty["median_kg"] > 1000.0
     assert said == [f"payload: the empty dipper weighs {empty['median_kg'] / 1000:+.1f} t on its "

@@ -157,3 +157,47 @@ def test_the_passes_the_model_did_not_fit_are_named(tmp_path: Path) -> None:
     assert main(["report", "--db", str(db), "--out", str(tmp_path / "r2")]) == 0
     page = (tmp_path / "r2" / "index.html").read_text()
     assert "records no misfit" in page and "id='misfits'" not in page
+
+
+def test_the_empty_dipper_on_the_returns_is_reported_with_the_daemons_verdict(
+        tmp_path: Path) -> None:
+    """The returns' checks as the daemon kept them: their spread, the moment the median
+    went beyond the daemon's level (named with the causes), the plot and the table; a
+    log that records none says so."""
+    db, made = shift(tmp_path)
+    log = PassLog(db, "s1")
+    kgs = [40.0, -85.0, 1610.0, 1720.0, 1655.0, 1590.0, 1700.0, 1688.0]
+    for k, (p, kg) in enumerate(zip(made, kgs, strict=False)):
+        med = float(np.median(kgs[max(0, k - 4):k + 1]))
+        log.write_empty({"after_pass": p["pass"], "end_s": 0.0, "payload_kg": kg,
+                         "std_kg": 90.0, "samples": 100, "median_kg": med},
+                        p["end"] + 6.0, 500.0, k >= 4 and abs(med) > 500.0)
+    log.close()
+    out = tmp_path / "r"
+    assert main(["report", "--db", str(db), "--out", str(out)]) == 0
+    page = (out / "index.html").read_text()
+    section = page.split("<h2>The empty dipper on the returns</h2>")[1]
+    assert "8 returns: median +1655 kg, from -85 to +1720 kg" in section
+    assert "at the end +1688 kg, against the daemon's level of ±500 kg" in section
+    # the fifth check was the first with five returns, median 1610 kg: beyond
+    assert ("<p id='empty' class='bad'>The median of the last returns was beyond the level "
+            "at 4 returns, the first ending") in section
+    assert "(median +1610 kg)" in section and "calibrate again" in section
+    assert "alt='the empty dipper on the returns'" in section
+    assert (out / "empty_dipper.png").stat().st_size > 5000
+    rows = list(csv.DictReader(open(out / "empties.csv")))
+    assert [float(r["empty_kg"]) for r in rows] == kgs
+    assert [r["beyond"] for r in rows] == ["0"] * 4 + ["1"] * 4
+    assert "empties.csv" in page
+
+    # a log of schema 2, which the daemon has not opened since: said, not "none"
+    import sqlite3
+
+    con = sqlite3.connect(db)
+    con.execute("DROP TABLE empties")
+    con.commit()
+    con.close()
+    assert main(["report", "--db", str(db), "--out", str(tmp_path / "r2")]) == 0
+    page = (tmp_path / "r2" / "index.html").read_text()
+    assert "records no empty-dipper checks" in page and "empties.csv" not in page
+    assert not (tmp_path / "r2" / "empties.csv").exists()
