@@ -15,7 +15,10 @@ passes:
   ``bench/payload_accuracy.py`` (seeds 1..N, 60 passes each): the misfit's spread;
 * ``--effects``: each simulated hidden effect alone at the bottom and the top of its
   typical range on ``bench/diagnose_matrix.py``'s machines (seeds 1, 2; 24 passes), the
-  base model calibrated on the effect's own trials: the misfit's median and spread;
+  base model calibrated on the effect's own trials: the misfit's median and spread, and
+  how many passes are above the daemon's level (the cab marks them); with ``--extend``
+  (``run_extended``), identified with and without the effect's own term on the trials
+  plus verified passes and judged on a fresh session: whether the marks go;
 * ``--drift N``: a calibration that no longer fits its machine. Realistic machines
   (seeds 1000, 2000, ... N of them) calibrated on their trials, then one part of the
   machine changed (a dipper 5 % heavier, the hoist's or the crowd's pull per ampere 5 %
@@ -24,7 +27,7 @@ passes:
   engine weighs it on each return (``EmptyCheck``).
 
     .venv/bin/python bench/pass_misfit.py [--handle] [--seeds 8] [--machines 18] [--effects]
-        [--drift 2]
+        [--drift 2] [--effects --extend --only swing_centrifugal,sensor_time_skew]
 """
 
 from __future__ import annotations
@@ -36,6 +39,8 @@ import statistics
 import tempfile
 from pathlib import Path
 from typing import Any
+
+from shoveld.payload.misfit import MISFIT_WARN
 
 
 def spread(xs: list[float]) -> str:
@@ -106,17 +111,20 @@ def pass_errors(est: Any, res: Any) -> list[float]:
             if (got := weighed(est, tp)) is not None]
 
 
-def run_effects() -> None:
+def run_effects(extend: bool, only: list[str]) -> None:
     from diagnose_matrix import simulate_session
 
     from shoveld.engine.offline import estimate_table
     from shoveld.identify.calibrate import Calibrator
     from shoveld.sim.effects import SIM_EFFECTS
 
+    if extend:
+        run_extended(only)
+        return
     print("each hidden effect alone at the bottom and the top of its typical range, base "
           "model, seeds 1-2, 24 passes each: the misfit; the passes' error, median (RMS); "
           "the empty dipper on the returns, median (range)")
-    for name in sorted(SIM_EFFECTS):
+    for name in sorted(only or SIM_EFFECTS):
         for size in SIM_EFFECTS[name].typical_range:
             every: list[float] = []
             errs: list[float] = []
@@ -128,11 +136,65 @@ def run_effects() -> None:
                 every.extend(p.misfit for p in est.passes)
                 errs.extend(pass_errors(est, ops))
                 empty.extend(e.payload_kg for e in est.empties)
-            rms = math.sqrt(statistics.fmean(e * e for e in errs))
-            print(f"  {name:24s} {size:8.3f}  {spread(every)}  error "
-                  f"{statistics.median(errs):+6.0f} ({rms:4.0f}) kg  empty "
-                  f"{statistics.median(empty):+6.0f} ({min(empty):+.0f} to {max(empty):+.0f}) kg",
-                  flush=True)
+            print(effect_line(name, size, "", every, errs, empty), flush=True)
+
+
+def effect_line(name: str, size: float, label: str, every: list[float], errs: list[float],
+                empty: list[float]) -> str:
+    rms = math.sqrt(statistics.fmean(e * e for e in errs))
+    return (f"  {name:24s} {size:8.3f} {label:13s} {spread(every)}  error "
+            f"{statistics.median(errs):+6.0f} ({rms:5.0f}) kg  empty "
+            f"{statistics.median(empty):+6.0f} ({min(empty):+.0f} to {max(empty):+.0f}) kg  "
+            f"above {MISFIT_WARN:g}: {sum(m > MISFIT_WARN for m in every)}/{len(every)}")
+
+
+def run_extended(only: list[str]) -> None:
+    """The marks a missing term leaves (the cab's "?", the empty dipper's problem), and
+    whether they go once the model has the term: each effect's machines identified three
+    ways, judged on a fresh session of 24 passes on the same machine: the base model on
+    the trials (what the daemon had), the base model on the trials plus the first
+    session's verified passes, and the model extended by the effect's own term on the
+    same (``shoveld calibrate --effects NAME --verified``, as after the diagnosis named
+    it). The trials alone cannot identify a term only swinging excites:
+    ``shoveld calibrate`` refuses it without verified passes."""
+    from diagnose_matrix import simulate_session
+
+    from shoveld.diagnose.fit import calibrate_with_verified
+    from shoveld.engine.offline import estimate_table
+    from shoveld.identify.calibrate import Calibrator
+    from shoveld.model.effects import EFFECT_TERMS
+    from shoveld.model.model import Model
+    from shoveld.sim.effects import SIM_EFFECTS, make_effects
+    from shoveld.sim.machine import Machine
+    from shoveld.sim.scenario import simulate_cycles
+
+    print("each hidden effect at the bottom and the top of its typical range, seeds 1-2, "
+          "judged on a fresh session of 24 passes: the misfit; the passes' error, median "
+          "(RMS); the empty dipper on the returns; passes above the cab's level")
+    for name in sorted(only or EFFECT_TERMS):
+        for size in SIM_EFFECTS[name].typical_range:
+            got: dict[str, tuple[list[float], list[float], list[float]]] = {}
+            for seed in (1, 2):
+                calib, ops = simulate_session({name: size}, seed, 24)
+                held = simulate_cycles(24, 1000 * seed + 4, payload_range=(3000.0, 35000.0),
+                                       truck_target_kg=None,
+                                       effects=make_effects({name: size}, form="bench"),
+                                       machine=Machine.draw(1000 * seed))
+                fits = {
+                    "base, trials": Calibrator(method="output").fit(calib).params_,
+                    "base, +passes": calibrate_with_verified(
+                        Model.from_names([]), calib, [ops.table], method="output")[0].params_,
+                    "+term, +passes": calibrate_with_verified(
+                        Model.from_names([name]), calib, [ops.table],
+                        method="output")[0].params_}
+                for label, params in fits.items():
+                    est = estimate_table(held.table, params)
+                    every, errs, empty = got.setdefault(label, ([], [], []))
+                    every.extend(p.misfit for p in est.passes)
+                    errs.extend(pass_errors(est, held))
+                    empty.extend(e.payload_kg for e in est.empties)
+            for label, (every, errs, empty) in got.items():
+                print(effect_line(name, size, label, every, errs, empty), flush=True)
 
 
 DRIFTS: dict[str, dict[str, float]] = {
@@ -178,6 +240,11 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=8)
     ap.add_argument("--machines", type=int, default=0)
     ap.add_argument("--effects", action="store_true")
+    ap.add_argument("--extend", action="store_true",
+                    help="with --effects: also weigh with the model extended by each "
+                         "effect's own term")
+    ap.add_argument("--only", default="", metavar="NAME,...",
+                    help="with --effects: these effects only")
     ap.add_argument("--drift", type=int, default=0, metavar="N")
     args = ap.parse_args()
     if not (args.handle or args.machines or args.effects or args.drift):
@@ -190,7 +257,7 @@ def main() -> None:
     if args.machines:
         run_machines(args.machines)
     if args.effects:
-        run_effects()
+        run_effects(args.extend, [n for n in args.only.split(",") if n])
     if args.drift:
         run_drift(args.drift)
 

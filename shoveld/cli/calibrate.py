@@ -121,6 +121,22 @@ def _settings(args: argparse.Namespace) -> dict[str, Any]:
             "angle_drift_deg": args.angle_drift, "position_noise": args.angle_noise}
 
 
+def _refuse_unexcited(model: Model, tables: list[SignalsTable],
+                      args: argparse.Namespace) -> None:
+    """A term the trials cannot identify is refused without ``--verified``: fitted on the
+    trials alone it weighed the passes of a swinging machine 8 t heavy (its radius and
+    inertia whatever the fit left them), where the diagnosis, which adds the verified
+    passes, cut the error to 48 kg (``bench/pass_misfit.py --effects --extend``)."""
+    from shoveld.diagnose.fit import unexcited_by_trials
+
+    why = unexcited_by_trials(model, tables, args.window, args.polyorder)
+    if why:
+        raise CliError(f"--effects {args.effects}: the trials cannot identify "
+                       f"{'; '.join(why)}; add scale-verified passes with --verified TABLE "
+                       "(the passes' payload_kg column filled while they are weighed), as "
+                       "the diagnosis does")
+
+
 def _with_verified(model: Model, tables: list[SignalsTable], args: argparse.Namespace
                    ) -> Calibrator:
     """The trials plus the verified passes of ``--verified`` (the pass segmentation and
@@ -148,6 +164,7 @@ def run(args: argparse.Namespace) -> int:
         if args.verified:
             cal = _with_verified(model, tables, args)
         else:
+            _refuse_unexcited(model, tables, args)
             cal = Calibrator(model=model, **_settings(args)).fit(tables)
     except ValueError as e:
         raise CliError(str(e)) from None

@@ -16,8 +16,13 @@ from typing import Any
 
 import numpy as np
 
-from shoveld.diagnose.data import DataSet, Pass
-from shoveld.identify.calibrate import Calibrator, FileData
+from shoveld.diagnose.data import DataSet, Pass, swing_time_s
+from shoveld.identify.calibrate import (
+    Calibrator,
+    ExclusionConfig,
+    FileData,
+    exclusion_masks,
+)
 from shoveld.kinematics import (
     DEFAULT_POLYORDER,
     DEFAULT_WINDOW_S,
@@ -73,6 +78,30 @@ def calibrate_with_verified(model: Model, trials: list[SignalsTable],
                          "the weighed payload through each verified pass)")
     cal = DiagCalibrator(model, ds, train, **options).fit(ds.calib)
     return cal, len(train), len(ds.passes)
+
+
+def unexcited_by_trials(model: Model, trials: list[SignalsTable],
+                        window_s: float = DEFAULT_WINDOW_S,
+                        polyorder: int = DEFAULT_POLYORDER) -> list[str]:
+    """The model's terms the calibration trials alone cannot identify, each with why (the
+    diagnosis identifies them with the verified passes; ``shoveld calibrate`` asks for
+    them): a swing term on trials that do not swing takes whatever values the fit leaves
+    it, and weighed the passes of a swinging machine 8 t heavy (``bench/pass_misfit.py
+    --effects --extend``). A term of a full dipper's currents (``needs_full_dipper``) is
+    not refused: a trial near a full dipper's load identifies it (docs/diagnosis.md)."""
+    out = []
+    swing_s: float | None = None
+    for t in model.terms:
+        if getattr(t, "needs_swing", False):
+            if swing_s is None:
+                files = [exclusion_masks(x, Model.from_names([]), ExclusionConfig(), window_s,
+                                         polyorder) for x in trials]
+                swing_s = swing_time_s(files, SWING_EXCITED_RAD_S)
+            if swing_s < SWING_EXCITED_S:
+                out.append(f"{t.name}: only swinging excites it, and the trials swing faster "
+                           f"than {SWING_EXCITED_RAD_S:g} rad/s for {swing_s:.1f} s (at least "
+                           f"{SWING_EXCITED_S:g} s needed)")
+    return out
 
 
 def needs_operation(model: Model, dataset: DataSet) -> bool:

@@ -16,6 +16,16 @@ from shoveld.model.terms import TERMS
 from shoveld.words import n_of
 
 
+def _verified_hint(found: list[str]) -> str:
+    """What the re-identification needs besides the trials: a term only swinging or a full
+    dipper excites was identified with the verified passes, and ``shoveld calibrate``
+    refuses it without them (fitted on trials alone it weighed passes tonnes off)."""
+    if any(getattr(TERMS.get(n), "needs_swing", False)
+           or getattr(TERMS.get(n), "needs_full_dipper", False) for n in found):
+        return " TRIALS --verified TABLES_OF_WEIGHED_PASSES"
+    return ""
+
+
 def _params_json(p: ModelParams) -> dict[str, Any]:
     units = p.model().param_units
     return {n: {"value": float(v), "stderr": float(se), "unit": u}
@@ -355,7 +365,7 @@ def write_report(d: Diagnosis, out_dir: str | Path) -> Path:
               f"Terms: {', '.join(d.extended_params.terms)}. Written to "
               "`extended.params.toml` (load it with `shoveld estimate --params` or the "
               "daemon; or re-identify with `shoveld calibrate --effects "
-              f"{','.join(d.found) or '...'}`).", "",
+              f"{','.join(d.found) or '...'}{_verified_hint(d.found)}`).", "",
               "| parameter | value | std err | unit |", "|---|---|---|---|"]
     for n, v in js["extended"]["params"].items():
         lines.append(f"| {n} | {v['value']:.6g} | {v['stderr']:.3g} | {v['unit']} |")

@@ -77,3 +77,33 @@ def test_calibrate_and_estimate_take_the_extended_model(
     assert main(["estimate", str(files["ops"]), "--params", str(out), "--json"]) == 0
     passes = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
     assert sum(1 for x in passes if x["valid"]) >= 12
+
+
+def test_calibrate_refuses_a_term_the_trials_cannot_identify_without_verified_passes(
+        files: dict[str, Path], capsys: pytest.CaptureFixture[str]) -> None:
+    """Fitted on trials that never swing, the swing's term took whatever values the fit
+    left it and weighed the passes of a swinging machine 8 t heavy; the diagnosis adds
+    the verified passes. The command says so in one line and writes nothing."""
+    effect = "swing_centrifugal"
+    why = ("swing_centrifugal: only swinging excites it, and the trials swing faster than "
+           "0.1 rad/s for 0.0 s (at least 5 s needed)")
+    out = files["dir"] / f"{effect}.toml"
+    capsys.readouterr()
+    assert main(["calibrate", str(files["c0"]), str(files["c1"]), "--effects",
+                 f"sensor_time_skew,{effect}", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err
+    assert err.startswith("shoveld calibrate: error: --effects sensor_time_skew,"), err
+    assert why in err and "add scale-verified passes with --verified TABLE" in err
+    assert "sensor_time_skew" not in err.split("identify", 1)[1]  # the trials do see a skew
+    assert not out.exists()
+
+
+def test_the_diagnosis_report_says_which_terms_need_the_verified_passes() -> None:
+    """The report's re-identification command carries ``--verified`` where the command
+    would otherwise refuse (or, before, weigh tonnes off)."""
+    from shoveld.diagnose.report import _verified_hint
+
+    assert _verified_hint(["sensor_time_skew", "ground_slope"]) == ""
+    assert "--verified" in _verified_hint(["sensor_time_skew", "swing_centrifugal"])
+    assert "--verified" in _verified_hint(["current_saturation"])  # as the diagnosis had it
