@@ -27,7 +27,8 @@ passes:
   engine weighs it on each return (``EmptyCheck``).
 
     .venv/bin/python bench/pass_misfit.py [--handle] [--seeds 8] [--machines 18] [--effects]
-        [--drift 2] [--effects --extend --only swing_centrifugal,sensor_time_skew]
+        [--drift 2]
+        [--effects --extend --only swing_centrifugal,sensor_time_skew,current_saturation]
 """
 
 from __future__ import annotations
@@ -150,13 +151,14 @@ def effect_line(name: str, size: float, label: str, every: list[float], errs: li
 
 def run_extended(only: list[str]) -> None:
     """The marks a missing term leaves (the cab's "?", the empty dipper's problem), and
-    whether they go once the model has the term: each effect's machines identified three
+    whether they go once the model has the term: each effect's machines identified four
     ways, judged on a fresh session of 24 passes on the same machine: the base model on
-    the trials (what the daemon had), the base model on the trials plus the first
-    session's verified passes, and the model extended by the effect's own term on the
-    same (``shoveld calibrate --effects NAME --verified``, as after the diagnosis named
-    it). The trials alone cannot identify a term only swinging excites:
-    ``shoveld calibrate`` refuses it without verified passes."""
+    the trials (what the daemon had); the model extended by the effect's own term on the
+    trials alone (what ``shoveld calibrate --effects NAME`` did); the base model on the
+    trials plus the first session's verified passes; and the extended model on the same
+    (``shoveld calibrate --effects NAME --verified``, as after the diagnosis named it).
+    The trials alone cannot identify a term only swinging excites: ``shoveld calibrate``
+    now refuses it without verified passes."""
     from diagnose_matrix import simulate_session
 
     from shoveld.diagnose.fit import calibrate_with_verified
@@ -182,6 +184,8 @@ def run_extended(only: list[str]) -> None:
                                        machine=Machine.draw(1000 * seed))
                 fits = {
                     "base, trials": Calibrator(method="output").fit(calib).params_,
+                    "+term, trials": Calibrator(model=Model.from_names([name]),
+                                                method="output").fit(calib).params_,
                     "base, +passes": calibrate_with_verified(
                         Model.from_names([]), calib, [ops.table], method="output")[0].params_,
                     "+term, +passes": calibrate_with_verified(

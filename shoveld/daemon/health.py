@@ -15,6 +15,7 @@ from drivers.base import Driver
 from shoveld.daemon.assemble import DeviceState
 from shoveld.daemon.loop import percentiles
 from shoveld.daemon.store import ReadingStore
+from shoveld.payload.misfit import MISFIT_PERSISTENT
 from shoveld.words import n_of
 
 
@@ -111,6 +112,14 @@ def problems(drivers: Mapping[str, dict[str, Any]], loop: dict[str, Any],
     if loop.get("failing_now"):
         out.append(f"loop: the last {n_of(loop['failing_now'], 'tick', 'ticks')} failed "
                    "(see the log)")
+    fit = loop.get("misfit")
+    if isinstance(fit, dict) and (fit.get("recent_above") or 0) >= MISFIT_PERSISTENT:
+        # one pass above the level is marked on the cab; most of the last ones above it
+        # is the machine or a sensor, for as long as it lasts (docs/engine.md, misfit)
+        out.append(f"payload: the model did not fit {fit['recent_above']} of the last "
+                   f"{fit.get('recent')} passes (misfit above {fit.get('warn') or 0:g}): it lacks "
+                   "something this machine does, or a sensor measures something else; "
+                   "shoveld diagnose names it")
     empty = loop.get("empty_dipper")
     if isinstance(empty, dict) and empty.get("beyond") and empty.get("median_kg") is not None:
         # a calibration (or model) fault the passes may share, by less or more than the

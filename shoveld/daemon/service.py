@@ -523,7 +523,9 @@ class Service:
             # how well the model fitted the passes since the start (docs/engine.md, "A
             # pass's misfit"): passes above the warning level, and the last pass's
             loop["misfit"] = {"warn": e.cfg.misfit_warn, "passes_above": e.misfit_high,
-                              "last": round_misfit(e.last_misfit)}
+                              "last": round_misfit(e.last_misfit),
+                              "recent": len(e.recent_misfits),
+                              "recent_above": sum(e.recent_misfits)}
             # the empty dipper weighed on the returns (docs/engine.md, "The empty dipper
             # on its returns"): the median of the last few, and how often it was beyond
             checks = e.empty_checks

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections import deque
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
@@ -41,7 +42,7 @@ from shoveld.kinematics.fixed_lag import FixedLagSavgol
 from shoveld.model.kin import Kinematics
 from shoveld.model.output import CurrentEquations, current_sigma
 from shoveld.model.params import ModelParams
-from shoveld.payload.misfit import MISFIT_WARN, round_misfit
+from shoveld.payload.misfit import MISFIT_RECENT, MISFIT_WARN, round_misfit
 from shoveld.payload.rls import PayloadRls, RlsConfig
 from shoveld.payload.trucks import Truck
 from shoveld.sample import CROWD_TARGET_CHANGED, Sample
@@ -276,6 +277,8 @@ class Engine:
         """Passes whose misfit was above ``misfit_warn``."""
         self.last_misfit = math.nan
         """The last finished pass's misfit (NaN: none yet, or no sample in it)."""
+        self.recent_misfits: deque[bool] = deque(maxlen=MISFIT_RECENT)
+        """Whether each of the last passes with a sample was above ``misfit_warn``."""
         self.rls_empty: PayloadRls | None = None
         """The empty dipper's filter while it returns (:class:`EmptyCheck`)."""
         self.return_start = math.nan
@@ -531,6 +534,8 @@ class Engine:
         else:
             reason = ""
         misfit = self.last_misfit = rls.misfit
+        if math.isfinite(misfit):
+            self.recent_misfits.append(misfit > self.cfg.misfit_warn)
         if misfit > self.cfg.misfit_warn:
             self.misfit_high += 1
             k = self.misfit_high

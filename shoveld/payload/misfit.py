@@ -19,6 +19,16 @@ still weighed; the daemon logs a warning and the shift report names the pass. Me
 4.6-123; something lodged on the handle, in the laser's beam, 62-578."""
 
 
+MISFIT_RECENT = 10
+"""The last passes the daemon's health counts the high misfits of."""
+MISFIT_PERSISTENT = 5
+"""A machine with at least this many of the last ``MISFIT_RECENT`` passes above the level
+has a problem health names (the cab's strip, the office's card), not a stray pass: the
+passes of 18 realistic machines as calibrated were never above it (0 of 1,080), a swing
+the model lacks puts every pass above it (48 of 48, ``bench/pass_misfit.py --effects
+--extend``), something on the handle one or two."""
+
+
 def round_misfit(m: float | None) -> float | None:
     """A misfit as recorded and published: two decimals, None when there is none (a pass
     without a valid sample)."""

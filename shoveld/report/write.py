@@ -225,7 +225,7 @@ def _misfit_section(f: ShiftFigures) -> list[str]:
                "a check of the weight: a machine changed since its calibration in a way "
                "that looks like payload (a dipper 5 % heavier) leaves it near 1 and every "
                "pass tonnes heavy; the empty dipper weighed on the returns says that (the "
-               "daemon's log and health) and a known load does.</p>")
+               "next section, and the daemon's health) and a known load does.</p>")
     if not f.misfit_high:
         out.append(f"<p id='misfit'>None above {MISFIT_WARN:g}.</p>")
         return out
