@@ -184,7 +184,8 @@ def test_a_ten_inch_panel_shows_the_whole_cab_page_without_scrolling(
 
 @pytest.fixture(scope="module")
 def fleet() -> Iterator[ThreadedScreen]:
-    """Six shovels in the middle of their trucks, each heard every half second."""
+    """Six shovels in the middle of their trucks, each heard every half second; the last
+    with the two payload problems health can name, the longest a card shows."""
     st = ScreenState()
     st.set_link("up", "test")
     ids = [f"shovel-{k:02d}" for k in range(1, 7)]
@@ -193,6 +194,12 @@ def fleet() -> Iterator[ThreadedScreen]:
         st.on_message(sid, "truck", {"truck": 10 + k, "passes": 3, "total_kg": 93000.0 + k,
                                      "target_kg": 136000.0, "fill_pct": 68.4,
                                      "status": "under"})
+    st.on_message(ids[-1], "health", {"ok": False, "problems": [
+        "payload: the model did not fit 6 of the last 10 passes (misfit above 3): it lacks "
+        "something this machine does, or a sensor measures something else; shoveld "
+        "diagnose names it",
+        "payload: the empty dipper weighs -1.7 t on its returns (median of the last 5): the "
+        "calibration or the model is off, the passes may be too; weigh a known load"]})
     yield from served(st, ids)
 
 
