@@ -363,6 +363,14 @@ def audit_log(path: str | Path) -> Audit:
         if len(open_) > 1 or (open_ and open_[0] != numbers[-1]):
             a.problems.append(f"open trucks {open_} (at most the newest may be open)")
         a.open_truck = open_[-1] if open_ else None
+        if "empties" in tables:
+            # a return's check is queued after its pass's commit: never before it
+            orphans = [r[0] for r in con.execute(
+                "SELECT after_pass FROM empties WHERE after_pass NOT IN "
+                "(SELECT pass FROM passes) ORDER BY after_pass")]
+            if orphans:
+                a.problems.append(f"empty-dipper checks after passes not in the log: "
+                                  f"{orphans}")
         if a.open_truck is not None:
             a.open_truck_passes = [r[0] for r in con.execute(
                 "SELECT pass FROM passes WHERE truck = ? ORDER BY pass", (a.open_truck,))]

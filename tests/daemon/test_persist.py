@@ -278,6 +278,12 @@ def test_the_empty_dipper_checks_are_kept_with_the_level_they_were_held_to(
                                            for a, kg, med, b in checks]
     assert [e["after_pass"] for e in read_empties(path, T0 + 70, T0 + 90) or []] == [2]
     assert not audit_log(path).problems
+    con = sqlite3.connect(path)  # a check whose pass is not there: the audit names it
+    con.execute("INSERT INTO empties VALUES (9, 's1', 0, 1, 1, 1, 1, 0, 500)")
+    con.commit()
+    con.close()
+    assert audit_log(path).problems == [
+        "empty-dipper checks after passes not in the log: [9]"]
     # a log of schema 2: no such table, read as it is, then opened by a daemon
     con = sqlite3.connect(path)
     con.executescript("DROP TABLE empties; UPDATE meta SET value = '2' WHERE key = 'schema';")
