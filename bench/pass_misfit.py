@@ -17,8 +17,9 @@ passes:
   typical range on ``bench/diagnose_matrix.py``'s machines (seeds 1, 2; 24 passes), the
   base model calibrated on the effect's own trials: the misfit's median and spread, and
   how many passes are above the daemon's level (the cab marks them); with ``--extend``
-  (``run_extended``), identified with and without the effect's own term on the trials
-  plus verified passes and judged on a fresh session: whether the marks go;
+  (``run_extended``), identified four ways (the base model and the one extended by the
+  effect's own term, each on the trials alone and on the trials plus verified passes)
+  and judged on a fresh session: whether the marks go;
 * ``--drift N``: a calibration that no longer fits its machine. Realistic machines
   (seeds 1000, 2000, ... N of them) calibrated on their trials, then one part of the
   machine changed (a dipper 5 % heavier, the hoist's or the crowd's pull per ampere 5 %
