@@ -196,6 +196,9 @@ def test_restart_restores_the_current_truck(tmp_path: Path, e2e_table: SignalsTa
         st = svc2.status()
         assert st["truck"]["truck"] == 1 and st["truck"]["passes"] == 2
         assert [p["pass"] for p in st["truck_passes"]] == [1, 2]
+        # restored from the pass log with their misfit, and marked by this daemon's level
+        assert all(p["misfit"] is not None and p["misfit_high"] == (p["misfit"] > 3.0)
+                   for p in st["truck_passes"])
         assert st["truck"]["total_kg"] == pytest.approx(
             est.passes[0].payload_kg + est.passes[1].payload_kg, rel=0.015)
     finally:
