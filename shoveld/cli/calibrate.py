@@ -90,6 +90,9 @@ def format_report(params: object) -> str:
         lines.append(f"hoist pull per ampere over the field: knots at "
                      f"{', '.join(f'{k:g}' for k in sorted(knots['field_knots_a']))} A, "
                      f"nominal {knots['field_nominal_a']:g} A (K_H)")
+    if "passes_to_trials_rms" in fit:
+        lines.append("residual RMS of the verified passes over the trials': " + ", ".join(
+            f"{k} {v:.2f}x" for k, v in fit["passes_to_trials_rms"].items()))
     if "current_residual_rms_a" in fit:
         lines.append("residual current RMS: " + ", ".join(
             f"{k} {v:.3g} A" for k, v in fit["current_residual_rms_a"].items()))
@@ -150,7 +153,25 @@ def _with_verified(model: Model, tables: list[SignalsTable], args: argparse.Name
         raise CliError(f"--verified {' '.join(args.verified)}: {e}") from None
     print(f"identified with {n_of(used, 'verified pass', 'verified passes')} of {found} in "
           f"{n_of(len(args.verified), 'table', 'tables')}", file=sys.stderr)
+    _warn_passes_to_trials(cal)
     return cal
+
+
+def _warn_passes_to_trials(cal: Calibrator) -> None:
+    """One line on stderr when the verified passes' residuals are well above the trials':
+    the model lacks something operation excites, and the daemon's misfit, read against
+    this calibration's noise, will not see it (``PASSES_TO_TRIALS_WARN``)."""
+    from shoveld.diagnose.fit import PASSES_TO_TRIALS_WARN
+
+    ratio = (cal.params_.fit.get("passes_to_trials_rms") or {}) if cal.params_ else {}
+    high = {ch: r for ch, r in ratio.items() if r > PASSES_TO_TRIALS_WARN}
+    if high:
+        print("warning: the verified passes' residuals are "
+              + ", ".join(f"{r:.1f} times the trials' ({ch})" for ch, r in high.items())
+              + f" (above {PASSES_TO_TRIALS_WARN:g}): the model lacks something this machine "
+              "does in operation (a swing, a sensor out of step); shoveld diagnose names it, "
+              "and the daemon's misfit, read against this calibration's noise, will not",
+              file=sys.stderr)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -89,6 +89,10 @@ def _key(model: Model) -> tuple[Any, ...]:
     return tuple(parts)
 
 
+VERIFIED_SUFFIX = " (verified passes)"
+"""What a table's name gains in the training files when its verified passes are in them."""
+
+
 def swing_time_s(files: list[FileData], rate: float) -> float:
     """How long the used samples of ``files`` swing faster than ``rate`` (rad/s), in s."""
     total = 0.0
@@ -156,7 +160,7 @@ class DataSet:
             use = f.use & sel & np.isfinite(truth)
             if not use.any():
                 continue
-            files.append(replace(f, name=f"{f.name} (verified passes)", payload=truth,
+            files.append(replace(f, name=f"{f.name}{VERIFIED_SUFFIX}", payload=truth,
                                  use=use, static=f.static & use, excluded=Counter()))
         return files
 

@@ -112,6 +112,10 @@ def test_calibrate_takes_scale_verified_passes_with_the_trials(
     assert used["v.csv (verified passes)"]["used"] > 1000
     assert [Path(k).name for k in trials.fit["excluded"]] == ["e.csv", "l.csv"]
     assert not np.allclose(trials.values, both.values)
+    # the passes fit as well as the trials: said in the report, recorded, no warning
+    ratio = both.fit["passes_to_trials_rms"]
+    assert set(ratio) == {"hoist", "crowd"} and all(0.8 < r < 1.5 for r in ratio.values())
+    assert "warning" not in err and "passes_to_trials_rms" not in trials.fit
     assert main(["calibrate", "--out", p1, e, l, "--verified", u]) == 2
     err = capsys.readouterr().err.strip()
     assert "--verified" in err and "u.csv" in err and "no pass with a verified payload" in err
@@ -202,3 +206,25 @@ def test_sim_of_one_pass_says_one_pass(tmp_path: Path,
     assert main(["sim", "--passes", "1", "--seed", "3", "--out", str(out)]) == 0
     said = capsys.readouterr().out
     assert " samples, " in said and ", 1 pass) and " in said, said  # not "1 passes"
+
+
+def test_calibrate_says_when_the_verified_passes_fit_worse_than_the_trials(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A swing the model lacks: the trials do not swing and fit; the verified passes do,
+    and their residuals are twice the trials' or more. The calibration's noise takes that
+    in, so the daemon's misfit will not see it: ``calibrate`` says so, in one line."""
+    e, l, v = (str(tmp_path / n) for n in ("e.csv", "l.csv", "v.csv"))
+    swing = ["--effect", "swing_centrifugal=2.5"]
+    for args in (["--scenario", "calibration", "--load", "0", "--seed", "5", "--out", e],
+                 ["--scenario", "calibration", "--load", "8420", "--seed", "6", "--out", l],
+                 ["--passes", "6", "--verified-fraction", "1", "--seed", "8", "--out", v]):
+        assert main(["sim", *args, *swing]) == 0
+    out = str(tmp_path / "p.toml")
+    capsys.readouterr()
+    assert main(["calibrate", "--out", out, e, l, "--verified", v]) == 0
+    captured = capsys.readouterr()
+    warned = [x for x in captured.err.splitlines() if x.startswith("warning:")]
+    ratio = load_params(out).fit["passes_to_trials_rms"]
+    assert max(ratio.values()) > 1.5, ratio
+    assert len(warned) == 1 and "shoveld diagnose names it" in warned[0], captured.err
+    assert "residual RMS of the verified passes over the trials': hoist" in captured.out
