@@ -169,7 +169,7 @@ def _warn_passes_to_trials(cal: Calibrator) -> None:
         print("warning: the verified passes' residuals are "
               + ", ".join(f"{r:.1f} times the trials' ({ch})" for ch, r in high.items())
               + f" (above {PASSES_TO_TRIALS_WARN:g}): the model lacks something this machine "
-              "does in operation (a swing, a sensor out of step); shoveld diagnose names it, "
+              "does in operation (a swing, a slope); shoveld diagnose names it, "
               "and the daemon's misfit, read against this calibration's noise, will not",
               file=sys.stderr)
 

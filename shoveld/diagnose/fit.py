@@ -70,7 +70,7 @@ simulated effect at either end of its range at most 1.47 (a friction growing wit
 load, crowd), and a sensor out of step below 1 (its trials fit worse; the empty dipper
 sees it). The misfit the daemon marks passes by is read against this
 calibration's noise, which then takes the missing term in: a swing that marked 48 of 48
-passes with the trials' noise marked 13 of 48 with this one (``bench/pass_misfit.py
+passes with the trials' noise marked 13-14 of 48 with this one (``bench/pass_misfit.py
 --effects --extend``), so ``calibrate`` says it where the daemon no longer can."""
 
 
@@ -126,7 +126,8 @@ def unexcited_by_trials(model: Model, trials: list[SignalsTable],
     them): a swing term on trials that do not swing takes whatever values the fit leaves
     it, and weighed the passes of a swinging machine 8 t heavy (``bench/pass_misfit.py
     --effects --extend``). A term of a full dipper's currents (``needs_full_dipper``) is
-    not refused: a trial near a full dipper's load identifies it (docs/diagnosis.md)."""
+    not refused: on the trials alone the saturation's still helps (the passes' RMS 304 ->
+    122 kg, the same bench); docs/diagnosis.md advises a trial near a full dipper's load."""
     out = []
     swing_s: float | None = None
     for t in model.terms:
