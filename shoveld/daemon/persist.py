@@ -251,6 +251,15 @@ class PassLog:
                 c.execute("ROLLBACK")
             raise
 
+    def closed_trucks_misfit_high(self, since_unix: float, warn: float) -> int:
+        """Weighed passes of the trucks closed since ``since_unix`` whose misfit was above
+        ``warn`` (the passes the cab marked): the shift's count the office shows."""
+        return int(self.con.execute(
+            "SELECT count(*) FROM passes p JOIN trucks t ON p.truck = t.truck "
+            "WHERE t.closed_unix IS NOT NULL AND t.closed_unix >= ? AND p.valid "
+            "AND p.misfit > ?",
+            (since_unix, warn)).fetchone()[0])
+
     def closed_truck_totals(self, since_unix: float) -> list[tuple[int, float, float, int]]:
         """(truck, total of valid passes, target, passes) of trucks closed since ``since_unix``."""
         rows = self.con.execute(

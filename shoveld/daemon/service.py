@@ -492,7 +492,9 @@ class Service:
             # restarted) shows the same totals as one that watched the whole shift.
             msg["shift"] = {"window_h": self.cfg.rule_window_h, "trucks": len(closed_trucks),
                             "passes": sum(n for *_, n in closed_trucks),
-                            "kg": round(sum(total for _, total, _, _ in closed_trucks), 1)}
+                            "kg": round(sum(total for _, total, _, _ in closed_trucks), 1),
+                            "misfit_high": self.passlog.closed_trucks_misfit_high(
+                                since, self.cfg.engine.misfit_warn)}
         return msg
 
     # -- health and status -----------------------------------------------------------------------

@@ -157,16 +157,21 @@ class ScreenState(CabState):
             return {"time": time.time(), "link": self.link, "link_detail": self.link_detail,
                     "version": self.version, "shovels": shovels}
 
-    def _shift_closed(self, shovel: str, truck: dict[str, Any]) -> dict[str, float]:
+    def _shift_closed(self, shovel: str, truck: dict[str, Any]) -> dict[str, Any]:
         """Closed trucks this shift: the daemon's count from its pass log when its truck
-        message carries one (true however late this screen started), else what was seen."""
-        seen = self.shift.get(shovel, {"trucks": 0, "passes": 0, "kg": 0.0})
+        message carries one (true however late this screen started), else what was seen.
+        ``misfit_high``: its passes the model did not fit, None when the daemon does not
+        count them (older than the count, or no ``shift`` at all)."""
+        seen = {**self.shift.get(shovel, {"trucks": 0, "passes": 0, "kg": 0.0}),
+                "misfit_high": None}
         ds = truck.get("shift")
         if not isinstance(ds, dict):
             return seen
         try:
+            marked = ds.get("misfit_high")
             return {"trucks": int(ds["trucks"]), "passes": int(ds["passes"]),
-                    "kg": float(ds["kg"])}
+                    "kg": float(ds["kg"]),
+                    "misfit_high": None if marked is None else int(marked)}
         except (KeyError, TypeError, ValueError):
             return seen
 
@@ -216,7 +221,10 @@ class ScreenState(CabState):
             "shift": {"trucks": shift["trucks"] + int(is_open),
                       "passes": shift["passes"] + (int(truck.get("passes") or 0)
                                                    if is_open else 0),
-                      "kg": shift["kg"] + (total if is_open else 0.0)},
+                      "kg": shift["kg"] + (total if is_open else 0.0),
+                      "misfit_high": None if shift["misfit_high"] is None else
+                      shift["misfit_high"] + (sum(bool(p["valid"] and p["misfit_high"])
+                                                  for p in passes) if is_open else 0)},
             "joints": self.joints.get(v.shovel),
             "problems": problems,
         }

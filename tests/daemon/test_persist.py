@@ -295,3 +295,20 @@ def test_the_empty_dipper_checks_are_kept_with_the_level_they_were_held_to(
     assert log.restore().next_pass == 4
     log.close()
     assert read_empties(path) == []
+
+
+def test_the_shift_counts_the_weighed_passes_of_closed_trucks_above_the_level(
+        tmp_path: Path) -> None:
+    log = PassLog(db_path(tmp_path), "s1")
+    fits = [(1, 1, True, 0.8), (2, 1, True, 4.2), (3, 1, False, 50.0), (4, 2, True, 9.9),
+            (5, 3, True, 7.0)]
+    for n, truck, valid, m in fits:
+        log.write_pass({**p(n, truck, valid=valid), "misfit": m}, T0 + 10 * n,
+                       T0 + 10 * n + 8, 62000.0)
+    log.close_truck(1, 62000.0, T0 + 30)
+    log.close_truck(2, 62000.0, T0 + 45)
+    # pass 3 was not weighed, truck 3 is open: truck 1's pass 2 and truck 2's pass 4
+    assert log.closed_trucks_misfit_high(T0, 3.0) == 2
+    assert log.closed_trucks_misfit_high(T0 + 40, 3.0) == 1  # truck 1 closed before
+    assert log.closed_trucks_misfit_high(T0, 5.0) == 1
+    log.close()

@@ -73,6 +73,9 @@ def test_table_through_the_service_to_zenoh(tmp_path: Path, e2e_table: SignalsTa
     assert closed[1]["shift"]["trucks"] == 2 and closed[1]["shift"]["passes"] == 3
     assert closed[1]["shift"]["kg"] == pytest.approx(
         closed[0]["total_kg"] + closed[1]["total_kg"], abs=0.2)
+    # the passes the cab marked, counted over the shift's closed trucks for the office
+    assert closed[1]["shift"]["misfit_high"] == sum(
+        bool(m["valid"] and m["misfit_high"]) for m in passes)
     assert closed[1]["target_kg"] == 62000.0
     # every message is JSON with its encoding; the other topics carry their fields
     assert {enc for _, _, enc in col.samples} == {"application/json"}

@@ -185,7 +185,8 @@ def test_a_ten_inch_panel_shows_the_whole_cab_page_without_scrolling(
 @pytest.fixture(scope="module")
 def fleet() -> Iterator[ThreadedScreen]:
     """Six shovels in the middle of their trucks, each heard every half second; the last
-    with the two payload problems health can name, the longest a card shows."""
+    with two passes this shift the model did not fit and the two payload problems health
+    can name, the longest a card shows."""
     st = ScreenState()
     st.set_link("up", "test")
     ids = [f"shovel-{k:02d}" for k in range(1, 7)]
@@ -194,6 +195,11 @@ def fleet() -> Iterator[ThreadedScreen]:
         st.on_message(sid, "truck", {"truck": 10 + k, "passes": 3, "total_kg": 93000.0 + k,
                                      "target_kg": 136000.0, "fill_pct": 68.4,
                                      "status": "under"})
+    st.on_message(ids[-1], "truck", {"truck": 16, "passes": 3, "total_kg": 93006.0,
+                                     "target_kg": 136000.0, "fill_pct": 68.4,
+                                     "status": "under", "shift": {
+                                         "trucks": 11, "passes": 48, "kg": 1_460_000.0,
+                                         "misfit_high": 2}})
     st.on_message(ids[-1], "health", {"ok": False, "problems": [
         "payload: the model did not fit 6 of the last 10 passes (misfit above 3): it lacks "
         "something this machine does, or a sensor measures something else; shoveld "
@@ -226,5 +232,9 @@ def test_the_office_sees_a_fleet_of_six_on_one_screen(fleet: ThreadedScreen, wid
                 (width, height, cards)
             assert overflow <= 0, (width, cards)
         assert len({round(c[1]) for c in cards}) <= 3  # at least two cards a row
+        # the shift's passes the model did not fit, on the card of the shovel that has them
+        texts = b.execute_script(
+            "return Array.from(document.querySelectorAll('#cards > *')).map(e => e.innerText)")
+        assert [("2 passes the model did not fit" in t) for t in texts] == [False] * 5 + [True]
     finally:
         b.quit()

@@ -61,10 +61,11 @@ def test_a_closed_truck_counts_once_in_the_shift() -> None:
                                   "target_kg": 136000.0, "status": "ok", "closed": True})
     s = st.snapshot()["shovels"][0]
     assert s["truck"]["closed"] and s["hint"]["kind"] == "closed"
-    assert s["shift"] == {"trucks": 1, "passes": 4, "kg": 130000.0}
+    assert s["shift"] == {"trucks": 1, "passes": 4, "kg": 130000.0, "misfit_high": None}
     st.on_message("s1", "truck", {"truck": 2, "passes": 1, "total_kg": 30000.0,
                                   "target_kg": 136000.0, "status": "under"})
-    assert st.snapshot()["shovels"][0]["shift"] == {"trucks": 2, "passes": 5, "kg": 160000.0}
+    assert st.snapshot()["shovels"][0]["shift"] == {"trucks": 2, "passes": 5, "kg": 160000.0,
+                                                    "misfit_high": None}
 
 
 def test_the_shift_comes_from_the_daemons_pass_log_when_it_says_so() -> None:
@@ -75,12 +76,12 @@ def test_the_shift_comes_from_the_daemons_pass_log_when_it_says_so() -> None:
         "status": "under", "shift": {"window_h": 12.0, "trucks": 8, "passes": 37,
                                      "kg": 1_050_000.0}}})
     assert st.snapshot()["shovels"][0]["shift"] == {"trucks": 9, "passes": 39,
-                                                    "kg": 1_110_000.0}
+                                                    "kg": 1_110_000.0, "misfit_high": None}
     st.on_message("s1", "truck", {"truck": 9, "passes": 4, "total_kg": 130000.0,
                                   "target_kg": 136000.0, "status": "ok", "closed": True,
                                   "shift": {"trucks": 9, "passes": 41, "kg": 1_180_000.0}})
     assert st.snapshot()["shovels"][0]["shift"] == {"trucks": 9, "passes": 41,
-                                                    "kg": 1_180_000.0}
+                                                    "kg": 1_180_000.0, "misfit_high": None}
 
 
 def test_passes_the_model_did_not_fit_are_marked_by_the_daemons_word() -> None:
@@ -113,3 +114,18 @@ def test_passes_the_model_did_not_fit_are_marked_by_the_daemons_word() -> None:
     st.on_message("s1", "truck", {"truck": 3, "passes": 0, "total_kg": 0.0,
                                   "target_kg": 136000.0, "fill_pct": 0.0, "status": "under"})
     assert st.snapshot()["shovels"][0]["doubt"] is None
+
+
+def test_the_shift_counts_the_passes_the_model_did_not_fit() -> None:
+    """The daemon counts its closed trucks' marked passes from the pass log; the screen
+    adds the open truck's weighed ones (a pass not weighed is not marked)."""
+    st = ScreenState()
+    st.on_message("s1", "truck", {"truck": 9, "passes": 0, "total_kg": 0.0,
+                                  "target_kg": 136000.0, "status": "under",
+                                  "shift": {"trucks": 8, "passes": 37, "kg": 1_050_000.0,
+                                            "misfit_high": 2}})
+    for n, (valid, high) in enumerate([(True, True), (False, True), (True, False)], 40):
+        st.on_message("s1", "pass", {"pass": n, "truck": 9, "payload_kg": 30000.0,
+                                     "std_kg": 200.0, "valid": valid, "misfit": 5.0,
+                                     "misfit_high": high})
+    assert st.snapshot()["shovels"][0]["shift"]["misfit_high"] == 3

@@ -9,7 +9,7 @@ function card(s) {
     <h2>${screen.esc(s.shovel)} ${state}</h2>
     <div>live payload: <b class="live">${live}</b></div>
     <div>truck ${tr.truck ?? "-"}: <b class="truck">${screen.t(tr.total_kg)}</b> of ${screen.t(tr.target_kg, 0)}, ${screen.n(tr.passes ?? 0, "pass", "passes")}</div>
-    <div>this shift: <b class="shift">${screen.n(s.shift.passes, "pass", "passes")}, ${screen.t(s.shift.kg)}</b> in ${screen.n(s.shift.trucks, "truck", "trucks")}</div>
+    <div>this shift: <b class="shift">${screen.n(s.shift.passes, "pass", "passes")}, ${screen.t(s.shift.kg)}</b> in ${screen.n(s.shift.trucks, "truck", "trucks")}${s.shift.misfit_high ? `; <span class="doubtful">${screen.n(s.shift.misfit_high, "pass", "passes")} the model did not fit</span>` : ""}</div>
     <div class="problems">${s.problems.map(screen.esc).join("<br>")}</div>
   </section>`;
 }
