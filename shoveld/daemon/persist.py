@@ -270,6 +270,12 @@ class PassLog:
         return [(int(a), float(b), float(c), int(d)) for a, b, c, d in rows]
 
 
+def _window(since_unix: float | None, until_unix: float | None) -> tuple[float, float]:
+    """A reader's [since, until) as query bounds (None: open on that side)."""
+    return (since_unix if since_unix is not None else -1e18,
+            until_unix if until_unix is not None else 1e18)
+
+
 PASS_COLUMNS = ("pass", "truck", "shovel", "start", "end", "payload_kg", "std_kg", "samples",
                 "valid", "reason", "misfit")
 
@@ -284,8 +290,7 @@ def read_passes(path: str | Path, since_unix: float | None = None,
         q = ("SELECT pass, truck, shovel, start_unix, end_unix, payload_kg, std_kg, samples, "
              f"valid, reason, {misfit} FROM passes WHERE end_unix >= ? AND end_unix < ? "
              "ORDER BY pass")
-        rows = con.execute(q, (since_unix if since_unix is not None else -1e18,
-                               until_unix if until_unix is not None else 1e18)).fetchall()
+        rows = con.execute(q, _window(since_unix, until_unix)).fetchall()
         trucks = {int(t): (target, closed) for t, target, closed in con.execute(
             "SELECT truck, target_kg, closed_unix FROM trucks")}
     finally:
@@ -316,9 +321,7 @@ def read_empties(path: str | Path, since_unix: float | None = None,
         rows = con.execute(
             "SELECT after_pass, shovel, end_unix, payload_kg, std_kg, samples, median_kg, "
             "beyond, warn_kg FROM empties WHERE end_unix >= ? AND end_unix < ? "
-            "ORDER BY end_unix",
-            (since_unix if since_unix is not None else -1e18,
-             until_unix if until_unix is not None else 1e18)).fetchall()
+            "ORDER BY end_unix", _window(since_unix, until_unix)).fetchall()
     finally:
         con.close()
     out = []

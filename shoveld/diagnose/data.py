@@ -93,16 +93,6 @@ VERIFIED_SUFFIX = " (verified passes)"
 """What a table's name gains in the training files when its verified passes are in them."""
 
 
-def swing_time_s(files: list[FileData], rate: float) -> float:
-    """How long the used samples of ``files`` swing faster than ``rate`` (rad/s), in s."""
-    total = 0.0
-    for f in files:
-        fast = f.use & (np.abs(np.nan_to_num(f.kin.swing_rate)) > rate)
-        if len(f.kin.t) > 1:
-            total += float(np.count_nonzero(fast)) * float(np.median(np.diff(f.kin.t)))
-    return total
-
-
 @dataclass
 class DataSet:
     """The calibration trials and the measured tables of one diagnosis."""
@@ -170,4 +160,10 @@ class DataSet:
         the swing angle's noise, differentiated, passes 0.1 rad/s now and then in trials
         that never swing (on 4 of 10 realistic machines), and the swing terms' values
         cannot be found from those."""
-        return swing_time_s(self.calib_files(Model.from_names([])), rate)
+        base = self.calib_files(Model.from_names([]))
+        total = 0.0
+        for f in base:
+            fast = f.use & (np.abs(np.nan_to_num(f.kin.swing_rate)) > rate)
+            if len(f.kin.t) > 1:
+                total += float(np.count_nonzero(fast)) * float(np.median(np.diff(f.kin.t)))
+        return total

@@ -16,13 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from shoveld.diagnose.data import VERIFIED_SUFFIX, DataSet, Pass, swing_time_s
-from shoveld.identify.calibrate import (
-    Calibrator,
-    ExclusionConfig,
-    FileData,
-    exclusion_masks,
-)
+from shoveld.diagnose.data import VERIFIED_SUFFIX, DataSet, Pass
+from shoveld.identify.calibrate import Calibrator, FileData
 from shoveld.kinematics import (
     DEFAULT_POLYORDER,
     DEFAULT_WINDOW_S,
@@ -133,9 +128,8 @@ def unexcited_by_trials(model: Model, trials: list[SignalsTable],
     for t in model.terms:
         if getattr(t, "needs_swing", False):
             if swing_s is None:
-                files = [exclusion_masks(x, Model.from_names([]), ExclusionConfig(), window_s,
-                                         polyorder) for x in trials]
-                swing_s = swing_time_s(files, SWING_EXCITED_RAD_S)
+                swing_s = DataSet(trials, [], window_s=window_s,
+                                  polyorder=polyorder).calib_swing_s(SWING_EXCITED_RAD_S)
             if swing_s < SWING_EXCITED_S:
                 out.append(f"{t.name}: only swinging excites it, and the trials swing faster "
                            f"than {SWING_EXCITED_RAD_S:g} rad/s for {swing_s:.1f} s (at least "

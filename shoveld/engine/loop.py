@@ -290,10 +290,6 @@ class Engine:
         """Checks whose median was beyond ``empty_warn_kg``."""
         self.empty_median = math.nan
         """The median of ``empty_checks``."""
-        self.empty_beyond = False
-        """Whether the last check's median was beyond ``empty_warn_kg`` (with the
-        ``empty_returns`` checks it takes): the state health reports, cleared by a median
-        back within it."""
         self.pass_index = first_pass - 1
         self._cycle = 0
         """Dig cycles started: tags the lagged samples so none crosses into another cycle
@@ -419,6 +415,14 @@ class Engine:
             self.truck = Truck(self.truck.index + 1, self.cfg.truck_target_kg)
         return out
 
+    @property
+    def empty_beyond(self) -> bool:
+        """Whether the median of the last ``empty_returns`` checks (that many at least) is
+        beyond ``empty_warn_kg``: the state health reports, cleared by a median back
+        within it."""
+        return (len(self.empty_checks) >= self.cfg.empty_returns
+                and abs(self.empty_median) > self.cfg.empty_warn_kg)
+
     # -- internals --------------------------------------------------------------------
     def _transition(self, prev: int, ph: int, t: float) -> list[Event]:
         out: list[Event] = []
@@ -473,8 +477,6 @@ class Engine:
         checks.append(kg)
         del checks[:-max(1, self.cfg.empty_returns)]
         med = self.empty_median = float(np.median(checks))
-        self.empty_beyond = (len(checks) >= self.cfg.empty_returns
-                             and abs(med) > self.cfg.empty_warn_kg)
         if self.empty_beyond:
             self.empty_warned += 1
             k = self.empty_warned

@@ -286,6 +286,25 @@ def machine_and_params() -> tuple[Machine, ModelParams]:
     return calibrated_machine()
 
 
+def run_to_the_end(table: SignalsTable, cfg: Any, params: ModelParams
+                   ) -> tuple[list[dict[str, Any]], dict[str, Any], dict[str, Any]]:
+    """The whole table through the service on a simulated clock: its pass messages, then
+    the health it publishes and the status it answers at the end."""
+    got: list[dict[str, Any]] = []
+    svc, feed = table_service(table, cfg, params, close_truck_at_end=True)
+    svc.on_event = lambda k, m: got.append({"topic": k, **m})
+    svc.start()
+    try:
+        svc.run(threading.Event(), done=lambda: feed.finished)
+        svc.flush()
+        svc._publish_health(svc.clock.now())
+        assert svc.health_msg is not None
+        health, status = svc.health_msg, svc.status()
+    finally:
+        svc.close()
+    return [m for m in got if m["topic"] == "pass"], health, status
+
+
 @pytest.mark.parametrize("dipper", [1.0, 1.05])
 def test_an_empty_dipper_weighed_heavy_on_the_returns_is_a_problem_health_names(
         tmp_path: Path, machine_and_params: tuple[Machine, ModelParams], dipper: float) -> None:
@@ -297,18 +316,7 @@ def test_an_empty_dipper_weighed_heavy_on_the_returns_is_a_problem_health_names(
     machine, params = machine_and_params
     table = cycles(machine, dipper=dipper, passes=7).table
     cfg = make_cfg(tmp_path, engine={"misfit_warn": 0.0})
-    got: list[dict[str, Any]] = []
-    svc, feed = table_service(table, cfg, params, close_truck_at_end=True)
-    svc.on_event = lambda k, m: got.append({"topic": k, **m})
-    svc.start()
-    try:
-        svc.run(threading.Event(), done=lambda: feed.finished)
-        svc.flush()
-        svc._publish_health(svc.clock.now())
-        health, status = svc.health_msg, svc.status()
-    finally:
-        svc.close()
-    passes = [m for m in got if m["topic"] == "pass"]
+    passes, health, status = run_to_the_end(table, cfg, params)
     assert len(passes) == 7 and all(m["misfit_high"] == m["valid"] for m in passes)
     empty = health["loop"]["empty_dipper"]
     said = [p for p in health["problems"] if "empty dipper" in p]
@@ -354,18 +362,7 @@ def test_a_machine_the_model_does_not_fit_is_a_problem_health_names(
                             truck_target_kg=None,
                             effects=make_effects({"swing_centrifugal": 2.5}, form="bench")).table
     cfg = make_cfg(tmp_path)
-    got: list[dict[str, Any]] = []
-    svc, feed = table_service(table, cfg, params, close_truck_at_end=True)
-    svc.on_event = lambda k, m: got.append({"topic": k, **m})
-    svc.start()
-    try:
-        svc.run(threading.Event(), done=lambda: feed.finished)
-        svc.flush()
-        svc._publish_health(svc.clock.now())
-        health, status = svc.health_msg, svc.status()
-    finally:
-        svc.close()
-    passes = [m for m in got if m["topic"] == "pass"]
+    passes, health, status = run_to_the_end(table, cfg, params)
     assert len(passes) == 6 and all(m["valid"] and m["misfit_high"] for m in passes), passes
     assert min(m["misfit"] for m in passes) > 3.0
     fit = health["loop"]["misfit"]
