@@ -50,7 +50,7 @@ def main() -> None:
     ap.add_argument("--effects", action="store_true",
                     help="each other simulated effect at both ends of its range, seeds 1-2")
     args = ap.parse_args()
-    from shoveld.diagnose.fit import PASSES_TO_TRIALS_WARN as warn
+    from shoveld.payload.misfit import PASSES_TO_TRIALS_WARN as warn
     from shoveld.sim.effects import SIM_EFFECTS
 
     print(f"RMS of the verified passes' residual currents over the trials' (warned above "

@@ -160,18 +160,14 @@ def _with_verified(model: Model, tables: list[SignalsTable], args: argparse.Name
 def _warn_passes_to_trials(cal: Calibrator) -> None:
     """One line on stderr when the verified passes' residuals are well above the trials':
     the model lacks something operation excites, and the daemon's misfit, read against
-    this calibration's noise, will not see it (``PASSES_TO_TRIALS_WARN``)."""
-    from shoveld.diagnose.fit import PASSES_TO_TRIALS_WARN
+    this calibration's noise, will not see it (``PASSES_TO_TRIALS_WARN``). The ratio is
+    recorded with the params, so ``check-config`` and the daemon's health say it too."""
+    from shoveld.payload.misfit import passes_to_trials_above, passes_to_trials_note
 
-    ratio = (cal.params_.fit.get("passes_to_trials_rms") or {}) if cal.params_ else {}
-    high = {ch: r for ch, r in ratio.items() if r > PASSES_TO_TRIALS_WARN}
-    if high:
-        print("warning: the verified passes' residuals are "
-              + ", ".join(f"{r:.1f} times the trials' ({ch})" for ch, r in high.items())
-              + f" (above {PASSES_TO_TRIALS_WARN:g}): the model lacks something this machine "
-              "does in operation (a swing, a slope); shoveld diagnose names it, "
-              "and the daemon's misfit, read against this calibration's noise, will not",
-              file=sys.stderr)
+    fit = cal.params_.fit if cal.params_ else {}
+    note = passes_to_trials_note(passes_to_trials_above(fit.get("passes_to_trials_rms")))
+    if note:
+        print(f"warning: {note}", file=sys.stderr)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -15,7 +15,11 @@ from drivers.base import Driver
 from shoveld.daemon.assemble import DeviceState
 from shoveld.daemon.loop import percentiles
 from shoveld.daemon.store import ReadingStore
-from shoveld.payload.misfit import MISFIT_PERSISTENT
+from shoveld.payload.misfit import (
+    MISFIT_PERSISTENT,
+    PASSES_TO_TRIALS_WARN,
+    passes_to_trials_note,
+)
 from shoveld.words import n_of
 
 
@@ -120,6 +124,12 @@ def problems(drivers: Mapping[str, dict[str, Any]], loop: dict[str, Any],
                    f"{fit.get('recent')} passes (misfit above {fit.get('warn') or 0:g}): it lacks "
                    "something this machine does, or a sensor measures something else; "
                    "shoveld diagnose names it")
+    cal = loop.get("calibration")
+    if isinstance(cal, dict) and cal.get("above"):
+        # the misfit above cannot say it: it is read against this calibration's noise,
+        # which took the missing term in (docs/engine.md, "The calibration's own check")
+        out.append("payload: " + passes_to_trials_note(cal["above"],
+                                                      cal.get("warn", PASSES_TO_TRIALS_WARN)))
     empty = loop.get("empty_dipper")
     if isinstance(empty, dict) and empty.get("beyond") and empty.get("median_kg") is not None:
         # a calibration (or model) fault the passes may share, by less or more than the

@@ -32,7 +32,13 @@ from shoveld.daemon.publisher import Publisher
 from shoveld.daemon.store import ReadingStore
 from shoveld.engine.loop import EmptyCheck, Engine, LiveEstimate, PassResult, TruckResult
 from shoveld.model.params import ModelParams
-from shoveld.payload.misfit import misfit_high, round_misfit
+from shoveld.payload.misfit import (
+    PASSES_TO_TRIALS_WARN,
+    misfit_high,
+    passes_to_trials_above,
+    passes_to_trials_note,
+    round_misfit,
+)
 from shoveld.payload.trucks import Truck, rule_101020
 from shoveld.sample import Sample
 
@@ -81,6 +87,10 @@ class Service:
                  before_tick: Callable[[float], None] | None = None) -> None:
         self.cfg = cfg
         self.params = params
+        self.calibration_above = passes_to_trials_above(params.fit.get("passes_to_trials_rms"))
+        """The channels whose verified passes fit worse than the trials in the calibration
+        (``calibrate --verified``): a term missing that the misfit, read against that
+        calibration's noise, does not mark; health names it for as long as it is in use."""
         self.clock: Clock = clock or MonotonicClock()
         self.driver_clock = driver_clock or time.monotonic
         self.close_truck_at_end = close_truck_at_end
@@ -236,6 +246,9 @@ class Service:
         self.truck_msg = self._truck_msg(self.engine.truck.as_dict(), False)
         log.info("pass log %s: next pass %d, truck %d with %d passes", self.passlog.path,
                  r.next_pass, r.truck, len(r.truck_passes))
+        if self.calibration_above:
+            log.warning("params %s: %s", cfg.params_path,
+                        passes_to_trials_note(self.calibration_above))
         self._persist_thread = threading.Thread(target=self._persist_loop, name="passlog",
                                                 daemon=True)
         self._persist_thread.start()
@@ -514,6 +527,11 @@ class Service:
         loop["sync"] = ({"device": self.cfg.loop.sync, **pll.as_dict()} if pll is not None
                         else {"device": self.cfg.loop.sync, "state": "off"})
         loop["tick_errors"] = self.tick_errors
+        # the calibration's own check of its verified passes against its trials
+        # (calibrate --verified): a model lacking a term it will not mark pass by pass
+        loop["calibration"] = {
+            "passes_to_trials_rms": self.params.fit.get("passes_to_trials_rms") or None,
+            "warn": PASSES_TO_TRIALS_WARN, "above": self.calibration_above}
         loop["failing_now"] = self._consecutive_errors
         if self.engine is not None:
             # how often a pass's first moments out of the bank agreed with the rest of it

@@ -56,19 +56,6 @@ class DiagCalibrator(Calibrator):
         return self.dataset.training_files(self.model, self.train)
 
 
-PASSES_TO_TRIALS_WARN = 1.5
-"""The RMS of the verified passes' residuals over the trials' in one calibration, above
-which the model lacks something operation excites: 1.02-1.18 on 54 realistic simulated
-machines (hoist; the crowd 0.99-1.04); 2.05-3.17 with a swing the model lacks (2.2-2.7
-crowd; eight machines); a 7° slope 2.05 (crowd) on one of two machines; every other
-simulated effect at either end of its range at most 1.47 (a friction growing with the
-load, crowd), and a sensor out of step below 1 (its trials fit worse; the empty dipper
-sees it). The misfit the daemon marks passes by is read against this
-calibration's noise, which then takes the missing term in: a swing that marked 48 of 48
-passes with the trials' noise marked 13-14 of 48 with this one (``bench/pass_misfit.py
---effects --extend``), so ``calibrate`` says it where the daemon no longer can."""
-
-
 def passes_to_trials_rms(cal: Calibrator) -> dict[str, float]:
     """Per channel, the RMS of the verified passes' residuals over the trials' in ``cal``,
     a calibration with both (``calibrate_with_verified``); empty without either."""

@@ -209,7 +209,18 @@ def load_params(path: str | Path) -> ModelParams:
                 raise ParamsFileError(f"{spath}: key 'current_noise.{ch}.{key}' must be a "
                                       "non-negative number")
             current_noise[ch][key] = float(x)
+    # The fit's record is for people, except the verified passes' ratio to the trials,
+    # which check-config and the daemon's health read (shoveld.payload.misfit)
+    fit = doc.get("fit", {})
+    if not isinstance(fit, dict):
+        raise ParamsFileError(f"{spath}: key 'fit' must be a table")
+    ratio = fit.get("passes_to_trials_rms", {})
+    if not isinstance(ratio, dict) or not all(
+            isinstance(r, int | float) and not isinstance(r, bool) and math.isfinite(r)
+            and r > 0 for r in ratio.values()):
+        raise ParamsFileError(f"{spath}: key 'fit.passes_to_trials_rms' must be a table of "
+                              f"positive numbers, one per channel; got {ratio!r}")
     return ModelParams(terms=list(model.term_names), names=model.param_names,
                        values=np.asarray(values), stderr=np.asarray(stderr), cov=cov,
                        noise=noise, hyper={k: dict(v) for k, v in hyper.items()},
-                       fit=dict(doc.get("fit", {})), current_noise=current_noise)
+                       fit=dict(fit), current_noise=current_noise)

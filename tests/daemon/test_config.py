@@ -127,3 +127,23 @@ def test_unreadable_and_invalid_toml(tmp_path: Path) -> None:
     p.write_text("[shovel\n")
     with pytest.raises(ConfigError, match="not valid TOML"):
         load_config(p)
+
+
+def test_check_config_says_when_the_calibrations_passes_fit_worse_than_its_trials(
+        example: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A params file from ``calibrate --verified`` whose passes fit worse than its trials
+    is usable, and check-config says what it lacks, as calibrate did and health will."""
+    params = example.parent / "params.toml"
+    for ratio, warned in (("hoist = 1.12\ncrowd = 1.03", False),
+                          ("hoist = 2.57\ncrowd = 3.56", True)):
+        shutil.copy(PARAMS, params)
+        edit(params, "[fit.residual_rms]",
+             f"[fit.passes_to_trials_rms]\n{ratio}\n\n[fit.residual_rms]")
+        assert main(["check-config", str(example)]) == 0
+        out = capsys.readouterr().out
+        said = [x.strip() for x in out.splitlines() if "warning" in x]
+        assert said == ([
+            "warning: the calibration's passes fit worse than its trials (hoist 2.6, crowd "
+            "3.6 times): above 1.5, the model lacks something this machine does in "
+            "operation (a swing, a slope), which the misfit will not mark; shoveld "
+            "diagnose names it"] if warned else []), out

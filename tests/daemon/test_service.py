@@ -378,3 +378,55 @@ def test_a_machine_the_model_does_not_fit_is_a_problem_health_names(
     for above, named in ((4, False), (5, True)):
         loop = {"misfit": {"warn": 3.0, "recent": 10, "recent_above": above}}
         assert bool(problems({}, loop, {"open": True}, {})) is named
+
+
+def test_a_calibration_whose_verified_passes_fit_worse_is_a_problem_health_names(
+        tmp_path: Path, machine_and_params: tuple[Machine, ModelParams]) -> None:
+    """The same swing the model lacks, calibrated with verified passes as well as the
+    trials: the calibration's noise takes the swing in, so the passes' misfit, read
+    against it, no longer marks most of them and the persistent misfit is not named.
+    The calibration recorded its passes fitting worse than its trials; the daemon reads
+    that record and names it in health, for the cab and the office, from the start."""
+    from shoveld.diagnose.fit import calibrate_with_verified
+    from shoveld.model.model import Model
+    from shoveld.sim.effects import make_effects
+    from shoveld.sim.scenario import simulate_calibration, simulate_cycles
+
+    machine, trials_only = machine_and_params
+    swing = {"effects": make_effects({"swing_centrifugal": 2.5}, form="bench")}
+    trials = [simulate_calibration(kg, 2010 + k, machine=machine, **swing).table
+              for k, kg in ((1, 0.0), (2, 8420.0))]
+    verified = simulate_cycles(6, 2013, machine=machine, verified_fraction=1.0,
+                               payload_range=(3000.0, 35000.0), truck_target_kg=None,
+                               **swing).table
+    cal, used, _ = calibrate_with_verified(Model.from_names([]), trials, [verified])
+    params = cal.params_
+    assert params is not None and used == 6
+    ratio = params.fit["passes_to_trials_rms"]
+    assert max(ratio.values()) > 1.5, ratio
+    table = simulate_cycles(6, 2005, machine=machine, payload_range=(3000.0, 35000.0),
+                            truck_target_kg=None,
+                            effects=make_effects({"swing_centrifugal": 2.5}, form="bench")).table
+    passes, health, status = run_to_the_end(table, make_cfg(tmp_path), params)
+    assert len(passes) == 6
+    fit = health["loop"]["misfit"]
+    assert fit["recent_above"] < 5, fit  # what the misfit alone would leave unsaid
+    assert not [p for p in health["problems"] if "did not fit" in p]
+    cal_h = health["loop"]["calibration"]
+    assert cal_h["passes_to_trials_rms"] == ratio and set(cal_h["above"]) <= set(ratio)
+    said = [p for p in health["problems"] if "calibration's passes" in p]
+    high = ", ".join(f"{ch} {r:.1f}" for ch, r in ratio.items() if r > 1.5)
+    assert said == [f"payload: the calibration's passes fit worse than its trials ({high} "
+                    "times): above 1.5, the model lacks something this machine does in "
+                    "operation (a swing, a slope), which the misfit will not mark; shoveld "
+                    "diagnose names it"], health["problems"]
+    assert health["ok"] is False and said[0] in status["problems"]
+    screen = ScreenState()
+    screen.on_status("t1", status)
+    assert said[0] in screen.snapshot()["shovels"][0]["problems"]
+    # the trials-only calibration of the same machine records no ratio, and health has
+    # nothing of the kind to say (its misfit names the swing, the test above)
+    _, health, _ = run_to_the_end(table, make_cfg(tmp_path / "trials"), trials_only)
+    assert health["loop"]["calibration"] == {"passes_to_trials_rms": None, "warn": 1.5,
+                                             "above": {}}
+    assert not [p for p in health["problems"] if "calibration's" in p]

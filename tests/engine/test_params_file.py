@@ -112,3 +112,18 @@ def test_the_field_curve_above_its_top_knot_is_read_or_refused(tmp_path: Path) -
     with pytest.raises(ParamsFileError, match=r"params\.toml: hyper\.hoist_drive\.above_top_knot: "
                                               r"expected 'slope' or 'flat', got 'up'"):
         load_params(p)
+
+
+@pytest.mark.parametrize("value", ['"high"', "-2.4", "nan", "true", "[2.4]"])
+def test_a_passes_to_trials_ratio_that_is_not_a_positive_number_is_refused(
+        tmp_path: Path, value: str) -> None:
+    """The one record of the fit that the daemon and check-config read (the calibration's
+    verified passes against its trials) is checked like a parameter."""
+    p = variant(tmp_path, "[fit.residual_rms]",
+                f"[fit.passes_to_trials_rms]\nhoist = {value}\n\n[fit.residual_rms]")
+    with pytest.raises(ParamsFileError, match=r"params\.toml: key 'fit\.passes_to_trials_rms' "
+                                              r"must be a table of positive numbers"):
+        load_params(p)
+    p = variant(tmp_path, "[fit.residual_rms]",
+                "[fit.passes_to_trials_rms]\nhoist = 2.4\ncrowd = 1\n\n[fit.residual_rms]")
+    assert load_params(p).fit["passes_to_trials_rms"] == {"hoist": 2.4, "crowd": 1}

@@ -18,6 +18,13 @@ from tests.daemon.conftest import wait_for
 AT_A_GLANCE = ("payload", "truck-total", "remaining", "hint")
 
 
+def head(problem: str) -> str:
+    """A health problem as a screen without room for its whole shows it: "source: what",
+    and a mark that more follows (the why and what to do, after the second ": ")."""
+    parts = problem.split(": ", 2)
+    return problem if len(parts) < 3 else ": ".join(parts[:2]) + " …"
+
+
 def served(st: ScreenState, shovels: list[str]) -> Iterator[ThreadedScreen]:
     """The pages of ``st``, each shovel heard from every half second with a live payload
     of 31.2 t in the swing (a screen with nothing new marks a shovel silent)."""
@@ -134,7 +141,11 @@ def full_screen() -> Iterator[ThreadedScreen]:
     st.on_message("s1", "health", {"problems": [
         "laser: no reading for 3.0 s",
         "payload: the empty dipper weighs +1.6 t on its returns (median of the last 5): the "
-        "calibration or the model is off, the passes may be too; weigh a known load"], "ok": False})
+        "calibration or the model is off, the passes may be too; weigh a known load",
+        "payload: the calibration's passes fit worse than its trials (hoist 2.6, crowd "
+        "3.6 times): above 1.5, the model lacks something this machine does in "
+        "operation (a swing, a slope), which the misfit will not mark; shoveld "
+        "diagnose names it"], "ok": False})
     yield from served(st, ["s1"])
 
 
@@ -177,7 +188,17 @@ def test_a_ten_inch_panel_shows_the_whole_cab_page_without_scrolling(
         assert marked == ["434.9 ?0.3"], marked
         assert b.find_element("id", "doubt").text == (
             "? pass 4: the model did not fit it (misfit 6.2); its weight may be off")
-        assert "empty dipper weighs +1.6 t" in b.find_element("id", "health").text
+        # the three problems whole where the panel has room (1280 x 800), each one's head
+        # on the smaller (whole, they pushed the shift's line 45 px off it), and the whole
+        # of each in the strip's title
+        said = full_screen.state.snapshot()["shovels"][0]["problems"]
+        text, title = b.execute_script(
+            "const h = document.getElementById('health'); return [h.innerText, h.title]")
+        whole = text == " · ".join(said)
+        assert whole is (width == 1280), (width, text)
+        assert whole or (text == " · ".join(map(head, said)) and title == "\n".join(said)), \
+            (text, title)
+        assert "empty dipper weighs +1.6 t" in text
     finally:
         b.quit()
 
@@ -185,7 +206,7 @@ def test_a_ten_inch_panel_shows_the_whole_cab_page_without_scrolling(
 @pytest.fixture(scope="module")
 def fleet() -> Iterator[ThreadedScreen]:
     """Six shovels in the middle of their trucks, each heard every half second; the last
-    with two passes this shift the model did not fit and the two payload problems health
+    with two passes this shift the model did not fit and the three payload problems health
     can name, the longest a card shows."""
     st = ScreenState()
     st.set_link("up", "test")
@@ -205,7 +226,11 @@ def fleet() -> Iterator[ThreadedScreen]:
         "something this machine does, or a sensor measures something else; shoveld "
         "diagnose names it",
         "payload: the empty dipper weighs -1.7 t on its returns (median of the last 5): the "
-        "calibration or the model is off, the passes may be too; weigh a known load"]})
+        "calibration or the model is off, the passes may be too; weigh a known load",
+        "payload: the calibration's passes fit worse than its trials (hoist 2.6, crowd "
+        "3.6 times): above 1.5, the model lacks something this machine does in "
+        "operation (a swing, a slope), which the misfit will not mark; shoveld "
+        "diagnose names it"]})
     yield from served(st, ids)
 
 
@@ -236,5 +261,16 @@ def test_the_office_sees_a_fleet_of_six_on_one_screen(fleet: ThreadedScreen, wid
         texts = b.execute_script(
             "return Array.from(document.querySelectorAll('#cards > *')).map(e => e.innerText)")
         assert [("2 passes the model did not fit" in t) for t in texts] == [False] * 5 + [True]
+        # the problems whole where the screen has room for them (1920 x 1080, 1366 x 768),
+        # else each one's head (at 1024 x 768 the whole three ran 73 px off the screen),
+        # and the whole of each where the pointer rests
+        said = fleet.state.snapshot()["shovels"][-1]["problems"]
+        shown = b.execute_script(
+            "return Array.from(document.querySelectorAll('#cards > :last-child .problems > *'))"
+            ".map(e => [e.innerText, e.title])")
+        assert [title for _, title in shown] == said, shown
+        whole = [text for text, _ in shown] == said
+        assert whole or [text for text, _ in shown] == list(map(head, said)), shown
+        assert whole is (width > 1024), (width, shown)
     finally:
         b.quit()

@@ -26,8 +26,7 @@ function drawArm(j) {
 function render(snap) {
   const s = pick(snap);
   const probs = screen.problems(snap, s);
-  $("health").textContent = probs.length ? probs.join(" · ") : "all sensors ok";
-  $("health").className = probs.length ? "bad" : "ok";
+  showProblems(probs, true);
   $("link").textContent = screen.socketUp && snap && snap.link === "up" ? "link up" : "link down";
   if (!s) return;
   $("shovel").textContent = s.shovel;
@@ -70,6 +69,14 @@ function render(snap) {
   $("shift").textContent = r ? `${screen.n(r.trucks, "truck", "trucks")}, mean ${r.mean_pct} % of target, ${r.over_110_pct} % over 110 %, ${r.over_120} over 120 % — ` +
     (r.compliant ? "within the 10/10/20 rule" : "OUTSIDE the 10/10/20 rule") : "no truck closed yet";
   drawArm(s.joints);
+  screen.fitProblems(probs, showProblems);
+}
+
+function showProblems(probs, whole) {
+  const h = $("health");
+  h.textContent = probs.length ? probs.map(p => whole ? p : screen.head(p) + (screen.head(p) === p ? "" : " …")).join(" · ") : "all sensors ok";
+  h.title = whole ? "" : probs.join("\n");
+  h.className = probs.length ? "bad" : "ok";
 }
 
 screen.theme();

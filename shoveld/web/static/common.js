@@ -24,6 +24,27 @@ const screen = {
     };
     open();
   },
+  // A health problem's head: "source: what", before the why and what to do, which follow
+  // the second ": ".
+  head(p) {
+    const i = p.indexOf(": ");
+    const j = i < 0 ? -1 : p.indexOf(": ", i + 2);
+    return j < 0 ? p : p.slice(0, j);
+  },
+  // Whether the page runs off the screen, or a panel of it scrolls (the cab's panels do
+  // rather than push the page, on the 10-inch panels).
+  overflows() {
+    const d = document.documentElement;
+    return d.scrollHeight > innerHeight + 1 || d.scrollWidth > innerWidth + 1 ||
+      Array.from(document.querySelectorAll("main .panel")).some(e => e.scrollHeight > e.clientHeight + 1);
+  },
+  // Problems in whole where the screen has room for them, else their heads (the whole of
+  // each where the pointer rests): several at once must not push the page off the
+  // screen. show(list, whole) writes them; called once the rest of the page is drawn.
+  fitProblems(probs, show) {
+    show(probs, true);
+    if (probs.some(p => screen.head(p) !== p) && screen.overflows()) show(probs, false);
+  },
   // The link and health words: the page's own socket first, then Zenoh, then the shovel.
   problems(snap, shovel) {
     const out = [];

@@ -1,6 +1,6 @@
 // The mine office page: one card per shovel on the Zenoh network.
 "use strict";
-function card(s) {
+function card(s, whole) {
   const tr = s.truck || {};
   const state = s.silent ? `<span class="silent-tag">SILENT${s.age_s != null ? " for " + s.age_s.toFixed(0) + " s" : ""}</span>`
     : `<span class="state">${screen.esc((s.phase || "idle").toUpperCase())}</span>`;
@@ -10,7 +10,7 @@ function card(s) {
     <div>live payload: <b class="live">${live}</b></div>
     <div>truck ${tr.truck ?? "-"}: <b class="truck">${screen.t(tr.total_kg)}</b> of ${screen.t(tr.target_kg, 0)}, ${screen.n(tr.passes ?? 0, "pass", "passes")}</div>
     <div>this shift: <b class="shift">${screen.n(s.shift.passes, "pass", "passes")}, ${screen.t(s.shift.kg)}</b> in ${screen.n(s.shift.trucks, "truck", "trucks")}${s.shift.misfit_high ? `; <span class="doubtful">${screen.n(s.shift.misfit_high, "pass", "passes")} the model did not fit</span>` : ""}</div>
-    <div class="problems">${s.problems.map(screen.esc).join("<br>")}</div>
+    <div class="problems">${s.problems.map(p => { const h = whole ? p : screen.head(p); return `<div title="${screen.esc(p)}">${screen.esc(h)}${h === p ? "" : " …"}</div>`; }).join("")}</div>
   </section>`;
 }
 function render(snap) {
@@ -19,7 +19,9 @@ function render(snap) {
   h.textContent = probs.length ? probs.join(" · ") : "link ok";
   h.className = probs.length ? "bad" : "ok";
   if (!snap) return;
-  document.getElementById("cards").innerHTML = snap.shovels.map(card).join("");
+  const cards = document.getElementById("cards");
+  screen.fitProblems(snap.shovels.flatMap(s => s.problems),
+                     (_, whole) => { cards.innerHTML = snap.shovels.map(s => card(s, whole)).join(""); });
   const silent = snap.shovels.filter(s => s.silent).length;
   document.getElementById("summary").textContent = `${screen.n(snap.shovels.length, "shovel", "shovels")}, ${silent} silent`;
   document.getElementById("link").textContent = snap.link === "up" ? "link up" : "link down";
