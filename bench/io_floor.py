@@ -11,14 +11,18 @@ run so that the machine's load hits both alike:
   serial wake-up, ``send`` + ``recv`` per poll after a sleep to its deadline) and a loop
   thread sleeping to each 10 ms deadline;
 * ``selector``: one thread waiting on every descriptor and the next deadline (one
-  ``epoll``), as gpsd reads all its devices.
+  ``epoll``), as gpsd reads all its devices;
+* ``threads+puts``: the threads, and the loop thread puts ``--puts`` (default 2) small
+  messages on Zenoh each tick, to a subscriber in the child (a peer session here, a
+  client there, on loopback), as the daemon does with every tick published (``joints``
+  and ``payload/live``): the floor of the issue's workload.
 
 It prints the process's CPU as % of one core and its voluntary context switches a
 second (the wake-ups), median and range over the runs. What the daemon costs above
 this floor is its own work (``bench/daemon_live.py``); what a single-thread daemon
 could save is the difference between the two shapes.
 
-    .venv/bin/python bench/io_floor.py [--seconds 20] [--runs 3] [--json]
+    .venv/bin/python bench/io_floor.py [--seconds 20] [--runs 3] [--puts 2] [--json]
 """
 
 from __future__ import annotations
@@ -71,8 +75,20 @@ def stream(fd, hz, n):
 for s in servers:
     threading.Thread(target=echo, args=(s,), daemon=True).start()
 threading.Thread(target=stream, args=(laser_w, laser_hz, laser_n), daemon=True).start()
+if len(sys.argv) > 8:  # a Zenoh endpoint: subscribe to what the loop puts, like a cab
+    import json, zenoh
+    c = zenoh.Config()
+    c.insert_json5("mode", '"client"')
+    c.insert_json5("connect/endpoints", json.dumps([sys.argv[8]]))
+    c.insert_json5("scouting/multicast/enabled", "false")
+    session = zenoh.open(c)
+    sub = session.declare_subscriber("floor/**", lambda sample: None)
+    print("subscribed", flush=True)
 stream(mti_w, mti_hz, mti_n)
 """
+MESSAGE = ('{"time":1764460800.123,"swing_deg":12.345,"handle_deg":-3.21,"crowd_m":7.1234,'
+           '"boom_deg":45.0,"invalid":[]}')
+"""A ``joints`` message's size."""
 
 
 def voluntary_switches() -> int:
@@ -81,13 +97,17 @@ def voluntary_switches() -> int:
     return resource.getrusage(resource.RUSAGE_SELF).ru_nvcsw
 
 
-def run_threads(fds: tuple[int, int], socks: list[socket.socket], until: float) -> None:
-    """A thread per device and a loop thread, as the daemon runs them."""
+def run_threads(fds: tuple[int, int], socks: list[socket.socket], until: float,
+                pubs: tuple[object, ...] = ()) -> None:
+    """A thread per device and a loop thread, as the daemon runs them; the loop puts a
+    message on each of ``pubs`` (Zenoh publishers) every tick."""
     def loop() -> None:
         t = time.monotonic()
         while t < until:
             t += 1.0 / TICK_HZ
             time.sleep(max(0.0, t - time.monotonic()))
+            for pub in pubs:
+                pub.put(MESSAGE)  # type: ignore[attr-defined]
 
     def reader(fd: int) -> None:
         while time.monotonic() < until:
@@ -137,24 +157,50 @@ def run_selector(fds: tuple[int, int], socks: list[socket.socket], until: float)
     sel.close()
 
 
-def one_run(shape: str, seconds: float) -> tuple[float, float]:
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def one_run(shape: str, seconds: float, puts: int = 0) -> tuple[float, float]:
     """(% of one core, wake-ups a second) of this process over ``seconds``."""
     mti_r, mti_w = os.pipe()
     laser_r, laser_w = os.pipe()
-    child = subprocess.Popen(
-        [sys.executable, "-c", CHILD, str(mti_w), str(laser_w), str(MTI_HZ), str(LASER_HZ),
-         str(MTI_BYTES), str(LASER_BYTES), str(ANSWER_BYTES)],
-        pass_fds=(mti_w, laser_w), stdout=subprocess.PIPE, text=True)
+    session = None
+    argv = [sys.executable, "-c", CHILD, str(mti_w), str(laser_w), str(MTI_HZ), str(LASER_HZ),
+            str(MTI_BYTES), str(LASER_BYTES), str(ANSWER_BYTES)]
+    if shape == "threads+puts":
+        import zenoh
+
+        endpoint = f"tcp/127.0.0.1:{free_port()}"
+        c = zenoh.Config()
+        c.insert_json5("mode", '"peer"')
+        c.insert_json5("listen/endpoints", json.dumps([endpoint]))
+        c.insert_json5("scouting/multicast/enabled", "false")
+        session = zenoh.open(c)
+        argv.append(endpoint)
+    child = subprocess.Popen(argv, pass_fds=(mti_w, laser_w), stdout=subprocess.PIPE,
+                             text=True)
     try:
         assert child.stdout is not None
         ports = [int(p) for p in child.stdout.readline().split()]
         socks = [socket.create_connection(("127.0.0.1", p)) for p in ports]
         for s in socks:
             s.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        run = run_threads if shape == "threads" else run_selector
-        run((mti_r, laser_r), socks, time.monotonic() + 1.0)  # settle
+        pubs: tuple[object, ...] = ()
+        if session is not None:
+            assert child.stdout.readline().strip() == "subscribed"
+            pubs = tuple(session.declare_publisher(f"floor/{k}") for k in range(puts))
+        if shape == "selector":
+            def run(until: float) -> None:
+                run_selector((mti_r, laser_r), socks, until)
+        else:
+            def run(until: float) -> None:
+                run_threads((mti_r, laser_r), socks, until, pubs)
+        run(time.monotonic() + 1.0)  # settle
         c0, w0, v0 = time.process_time(), time.monotonic(), voluntary_switches()
-        run((mti_r, laser_r), socks, w0 + seconds)
+        run(w0 + seconds)
         c1, w1, v1 = time.process_time(), time.monotonic(), voluntary_switches()
         for s in socks:
             s.close()
@@ -162,6 +208,8 @@ def one_run(shape: str, seconds: float) -> tuple[float, float]:
     finally:
         child.kill()
         child.wait()
+        if session is not None:
+            session.close()
         for fd in (mti_r, mti_w, laser_r, laser_w):
             os.close(fd)
 
@@ -170,24 +218,30 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=20.0)
     ap.add_argument("--runs", type=int, default=3)
+    ap.add_argument("--puts", type=int, default=2,
+                    help="Zenoh puts a tick in the threads+puts shape (0: no such shape)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     got: dict[str, list[tuple[float, float]]] = {"threads": [], "selector": []}
+    if args.puts > 0:
+        got["threads+puts"] = []
     for _ in range(args.runs):
         for shape in got:
-            got[shape].append(one_run(shape, args.seconds))
+            got[shape].append(one_run(shape, args.seconds, args.puts))
     out = {shape: {"cpu_pct": [round(c, 2) for c, _ in v],
                    "wakes_per_s": [round(w) for _, w in v]} for shape, v in got.items()}
     if args.json:
         print(json.dumps(out))
         return
     print(f"the daemon's I/O pattern, no work: MTi {MTI_HZ:g} Hz, laser {LASER_HZ:g} Hz, two "
-          f"Modbus modules polled at {POLL_HZ:g} Hz, ticks at {TICK_HZ:g} Hz; "
+          f"Modbus modules polled at {POLL_HZ:g} Hz, ticks at {TICK_HZ:g} Hz "
+          f"(threads+puts: {args.puts} Zenoh puts a tick); "
           f"{args.runs} runs of {args.seconds:g} s each, alternating")
     for shape, v in out.items():
         c, w = v["cpu_pct"], v["wakes_per_s"]
-        print(f"  {shape:<9s} {statistics.median(c):5.2f} % of one core [{min(c):.2f}-{max(c):.2f}]"
-              f"   {statistics.median(w):5.0f} wake-ups/s [{min(w)}-{max(w)}]")
+        print(f"  {shape:<12s} {statistics.median(c):5.2f} % of one core "
+              f"[{min(c):.2f}-{max(c):.2f}]   {statistics.median(w):5.0f} wake-ups/s "
+              f"[{min(w)}-{max(w)}]")
 
 
 if __name__ == "__main__":
