@@ -199,6 +199,12 @@ def test_a_ten_inch_panel_shows_the_whole_cab_page_without_scrolling(
         assert whole or (text == " · ".join(map(head, said)) and title == "\n".join(said)), \
             (text, title)
         assert "empty dipper weighs +1.6 t" in text
+        # the panel is touch: a tap shows the whole, a second tap the heads again
+        strip = b.find_element("id", "health")
+        strip.click()
+        assert wait_for(lambda: strip.text == " · ".join(said), 3.0), strip.text
+        strip.click()
+        assert wait_for(lambda: (strip.text == " · ".join(said)) is whole, 3.0), strip.text
     finally:
         b.quit()
 
@@ -272,5 +278,13 @@ def test_the_office_sees_a_fleet_of_six_on_one_screen(fleet: ThreadedScreen, wid
         whole = [text for text, _ in shown] == said
         assert whole or [text for text, _ in shown] == list(map(head, said)), shown
         assert whole is (width > 1024), (width, shown)
+        # a tap on a card's problems shows that card's whole, and no other card changes
+        b.execute_script("document.querySelector('#cards > :last-child .problems > *').click()")
+        assert wait_for(lambda: b.execute_script(
+            "return Array.from(document.querySelectorAll('#cards > :last-child .problems > *'))"
+            ".map(e => e.innerText)") == said, 3.0)
+        assert b.execute_script(
+            "return Array.from(document.querySelectorAll('#cards > *')).map(e => e.innerText)"
+        )[:5] == texts[:5]
     finally:
         b.quit()

@@ -69,7 +69,7 @@ function render(snap) {
   $("shift").textContent = r ? `${screen.n(r.trucks, "truck", "trucks")}, mean ${r.mean_pct} % of target, ${r.over_110_pct} % over 110 %, ${r.over_120} over 120 % — ` +
     (r.compliant ? "within the 10/10/20 rule" : "OUTSIDE the 10/10/20 rule") : "no truck closed yet";
   drawArm(s.joints);
-  screen.fitProblems(probs, showProblems);
+  screen.fitProblems(probs, showProblems, screen.tapped());
 }
 
 function showProblems(probs, whole) {
@@ -80,5 +80,6 @@ function showProblems(probs, whole) {
 }
 
 screen.theme();
+screen.tappable($("health"), () => "", () => render(screen.snapshot));
 screen.connect(render);
 setInterval(() => render(screen.snapshot), 1000);

@@ -39,12 +39,26 @@ const screen = {
       Array.from(document.querySelectorAll("main .panel")).some(e => e.scrollHeight > e.clientHeight + 1);
   },
   // Problems in whole where the screen has room for them, else their heads (the whole of
-  // each where the pointer rests): several at once must not push the page off the
-  // screen. show(list, whole) writes them; called once the rest of the page is drawn.
-  fitProblems(probs, show) {
+  // each where the pointer rests, or for a while after a tap: the cab's panel is touch):
+  // several at once must not push the page off the screen. show(list, whole) writes
+  // them; called once the rest of the page is drawn.
+  fitProblems(probs, show, tapped = false) {
     show(probs, true);
-    if (probs.some(p => screen.head(p) !== p) && screen.overflows()) show(probs, false);
+    if (!tapped && probs.some(p => screen.head(p) !== p) && screen.overflows()) show(probs, false);
   },
+  TAP_MS: 15000,  // how long a tap shows the problems whole
+  // A tap on el shows the problems whole for TAP_MS (another tap, back to their heads);
+  // tapped(key) says whether it still does.
+  tappable(el, key = () => "", redraw = () => {}) {
+    screen.tapUntil = screen.tapUntil || {};
+    el.addEventListener("click", ev => {
+      const k = key(ev);
+      if (k === null) return;
+      screen.tapUntil[k] = Date.now() < (screen.tapUntil[k] || 0) ? 0 : Date.now() + screen.TAP_MS;
+      redraw();
+    });
+  },
+  tapped(key = "") { return Date.now() < ((screen.tapUntil || {})[key] || 0); },
   // The link and health words: the page's own socket first, then Zenoh, then the shovel.
   problems(snap, shovel) {
     const out = [];

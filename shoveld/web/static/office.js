@@ -20,12 +20,18 @@ function render(snap) {
   h.className = probs.length ? "bad" : "ok";
   if (!snap) return;
   const cards = document.getElementById("cards");
-  screen.fitProblems(snap.shovels.flatMap(s => s.problems),
-                     (_, whole) => { cards.innerHTML = snap.shovels.map(s => card(s, whole)).join(""); });
+  screen.fitProblems(snap.shovels.flatMap(s => s.problems), (_, whole) => {
+    cards.innerHTML = snap.shovels.map(s => card(s, whole || screen.tapped(s.shovel))).join("");
+  });
   const silent = snap.shovels.filter(s => s.silent).length;
   document.getElementById("summary").textContent = `${screen.n(snap.shovels.length, "shovel", "shovels")}, ${silent} silent`;
   document.getElementById("link").textContent = snap.link === "up" ? "link up" : "link down";
 }
 screen.theme();
+// a tap on a card's problems shows that card's whole (the cards are drawn anew each second)
+screen.tappable(document.getElementById("cards"), ev => {
+  const c = ev.target.closest(".problems") && ev.target.closest(".card");
+  return c ? c.dataset.shovel : null;
+}, () => render(screen.snapshot));
 screen.connect(render);
 setInterval(() => render(screen.snapshot), 1000);
