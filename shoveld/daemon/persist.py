@@ -76,6 +76,20 @@ class Restored:
     last_dump_unix: float | None = None
     last_dump_boot: str | None = None
     """The last dump on the live clock, "<boot id> <monotonic s>" (see ``write_pass``)."""
+    recent_misfits: list[float] = field(default_factory=list)
+    """The misfits of the last passes weighed with these params (at most
+    ``RESTORED_MISFITS``, oldest first): health's count of passes the model did not fit
+    goes on across a restart."""
+    empty_checks: list[float] = field(default_factory=list)
+    """The empty dipper's weights of the last returns with these params (at most
+    ``RESTORED_EMPTIES``, oldest first), for the same reason."""
+
+
+RESTORED_MISFITS = 10
+"""As many as the engine counts (``shoveld.payload.misfit.MISFIT_RECENT``)."""
+RESTORED_EMPTIES = 20
+"""More than the engine's median takes (``EngineConfig.empty_returns``, 5 by default):
+it keeps its last ones."""
 
 
 def db_path(state_dir: str | Path) -> Path:
@@ -168,7 +182,12 @@ class PassLog:
         except sqlite3.Error:
             pass
 
-    def restore(self) -> Restored:
+    def restore(self, params: str | None = None) -> Restored:
+        """Where the engine picks up: the next pass, the open truck and its passes, the
+        last dump; with ``params`` (``ModelParams.fingerprint``), the last misfits and
+        empty-dipper checks made with those params. The log keeps which params it was
+        written with since which pass: a start with other params starts their checks
+        afresh."""
         c = self.con
         last = c.execute("SELECT max(pass) FROM passes").fetchone()[0]
         r = Restored(next_pass=(last or 0) + 1)
@@ -187,7 +206,34 @@ class PassLog:
         r.last_dump_unix = end[0] if end else None
         boot = c.execute("SELECT value FROM meta WHERE key = 'last_dump_boot'").fetchone()
         r.last_dump_boot = boot[0] if boot and end else None
+        if params is not None:
+            self._restore_checks(r, params)
         return r
+
+    def _restore_checks(self, r: Restored, params: str) -> None:
+        c = self.con
+        row = c.execute("SELECT value FROM meta WHERE key = 'params'").fetchone()
+        since = c.execute("SELECT value FROM meta WHERE key = 'params_from_pass'").fetchone()
+        if row is None or row[0] != params or since is None:
+            c.execute("BEGIN IMMEDIATE")  # these params from the next pass on, both or none
+            try:
+                c.execute("INSERT OR REPLACE INTO meta(key, value) VALUES ('params', ?)",
+                          (params,))
+                c.execute("INSERT OR REPLACE INTO meta(key, value) "
+                          "VALUES ('params_from_pass', ?)", (str(r.next_pass),))
+                c.execute("COMMIT")
+            except BaseException:
+                if c.in_transaction:
+                    c.execute("ROLLBACK")
+                raise
+            return
+        first = int(since[0])
+        r.recent_misfits = [m for (m,) in reversed(c.execute(
+            "SELECT misfit FROM passes WHERE pass >= ? AND misfit IS NOT NULL "
+            "ORDER BY pass DESC LIMIT ?", (first, RESTORED_MISFITS)).fetchall())]
+        r.empty_checks = [kg for (kg,) in reversed(c.execute(
+            "SELECT payload_kg FROM empties WHERE after_pass >= ? "
+            "ORDER BY after_pass DESC LIMIT ?", (first, RESTORED_EMPTIES)).fetchall())]
 
     def write_pass(self, p: dict[str, Any], start_unix: float, end_unix: float,
                    target_kg: float, boot_stamp: str | None = None) -> bool:

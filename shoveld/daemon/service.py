@@ -232,9 +232,11 @@ class Service:
         cfg = self.cfg
         self.passlog = PassLog(db_path(cfg.state_dir), cfg.shovel_id,
                                durable=self.durable_pass_log)
-        r = self.passlog.restore()
+        r = self.passlog.restore(self.params.fingerprint())
         self.engine = Engine(self.params, cfg.engine, first_pass=r.next_pass, first_truck=r.truck,
                              truck_passes=r.truck_passes)
+        # health's payload problems go on across a restart (with the same params only)
+        self.engine.carry_on(r.recent_misfits, r.empty_checks)
         now = self.clock.now()
         if r.last_dump_unix is not None:
             since = getattr(self.clock, "since_boot_stamp", None)  # the live clock has it

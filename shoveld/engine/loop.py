@@ -415,6 +415,15 @@ class Engine:
             self.truck = Truck(self.truck.index + 1, self.cfg.truck_target_kg)
         return out
 
+    def carry_on(self, misfits: list[float], empties: list[float]) -> None:
+        """The checks a former run with the same params left (the pass log's, after a
+        restart), oldest first: the passes' misfits judged by this engine's level, and
+        the empty dipper's last weights."""
+        self.recent_misfits.extend(m > self.cfg.misfit_warn for m in misfits
+                                   if math.isfinite(m))
+        checks = self.empty_checks = list(empties)[-max(1, self.cfg.empty_returns):]
+        self.empty_median = float(np.median(checks)) if checks else math.nan
+
     @property
     def empty_beyond(self) -> bool:
         """Whether the median of the last ``empty_returns`` checks (that many at least) is

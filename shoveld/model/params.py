@@ -46,6 +46,19 @@ class ModelParams:
     the field engineer (a pass's std comes from its own residuals; keys
     ``shoveld.model.output.NOISE_KEYS``)."""
 
+    def fingerprint(self) -> str:
+        """A short digest of what weighs: the terms, their settings and the identified
+        values and noise. The pass log keeps it, so that a restart carries on the checks
+        of the same calibration and not of the one before it."""
+        import hashlib
+        import json
+
+        doc = {"terms": self.terms, "hyper": self.hyper, "names": self.names,
+               "values": [repr(float(v)) for v in self.values],
+               "noise": {k: repr(float(v)) for k, v in sorted(self.noise.items())}}
+        return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()
+                              ).hexdigest()[:16]
+
     def model(self) -> Model:
         m = Model.from_names([t for t in self.terms], self.hyper)
         if m.param_names != self.names:

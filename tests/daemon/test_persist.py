@@ -312,3 +312,37 @@ def test_the_shift_counts_the_weighed_passes_of_closed_trucks_above_the_level(
     assert log.closed_trucks_misfit_high(T0 + 40, 3.0) == 1  # truck 1 closed before
     assert log.closed_trucks_misfit_high(T0, 5.0) == 1
     log.close()
+
+
+def test_restore_carries_on_the_checks_of_the_same_params_only(tmp_path: Path) -> None:
+    """A restart gives back the last misfits (at most 10) and empty-dipper checks made
+    with the same params, oldest first; a start with other params gets none, and from
+    then on only those made with them."""
+    path = db_path(tmp_path)
+
+    def run(params: str, passes: range) -> None:
+        log = PassLog(path, "s1")
+        log.restore(params)
+        for n in passes:
+            assert log.write_pass({**p(n, 1), "misfit": 0.5 + n}, T0 + 30 * n,
+                                  T0 + 30 * n + 8, 62000.0)
+            log.write_empty({"after_pass": n, "end_s": 30.0 * n + 14,
+                             "payload_kg": 100.0 * n, "std_kg": 95.0, "samples": 100,
+                             "median_kg": 0.0}, T0 + 30 * n + 14, 500.0, False)
+        log.close()
+
+    run("calib-a", range(1, 13))
+    r = PassLog(path, "s1").restore("calib-a")
+    assert r.recent_misfits == [0.5 + n for n in range(3, 13)]  # the last 10
+    assert r.empty_checks == [100.0 * n for n in range(1, 13)]
+    assert r.next_pass == 13
+    run("calib-b", range(13, 15))  # recalibrated: a start with other params
+    r = PassLog(path, "s1").restore("calib-b")
+    assert r.recent_misfits == [13.5, 14.5] and r.empty_checks == [1300.0, 1400.0]
+    # the first start with other params has nothing to carry on, and says so by the
+    # empty lists; a reader without params asks for none
+    r = PassLog(path, "s1").restore("calib-c")
+    assert (r.recent_misfits, r.empty_checks) == ([], [])
+    r = PassLog(path, "s1").restore()
+    assert (r.recent_misfits, r.empty_checks, r.next_pass) == ([], [], 15)
+    assert not audit_log(path).problems

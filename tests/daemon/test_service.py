@@ -432,3 +432,49 @@ def test_a_calibration_whose_verified_passes_fit_worse_is_a_problem_health_names
     assert health["loop"]["calibration"] == {"passes_to_trials_rms": None, "warn": 1.5,
                                              "above": {}}
     assert not [p for p in health["problems"] if "calibration's" in p]
+
+
+def test_a_restart_keeps_the_payload_problems_of_the_same_calibration(
+        tmp_path: Path, machine_and_params: tuple[Machine, ModelParams]) -> None:
+    """The machine whose swing the model lacks, stopped after six marked passes and
+    started again: health names the model's misfit at once, from the pass log, where it
+    would have waited for five more passes; started with other params (a new
+    calibration), it starts afresh."""
+    from shoveld.sim.effects import make_effects
+    from shoveld.sim.scenario import simulate_cycles
+
+    machine, params = machine_and_params
+    table = simulate_cycles(6, 2005, machine=machine, payload_range=(3000.0, 35000.0),
+                            truck_target_kg=None,
+                            effects=make_effects({"swing_centrifugal": 2.5}, form="bench")).table
+    cfg = make_cfg(tmp_path)
+    _, health, _ = run_to_the_end(table, cfg, params)
+    named = [p for p in health["problems"] if "did not fit 6 of the last 6" in p]
+    assert len(named) == 1
+
+    def started_with(prm: ModelParams) -> dict[str, Any]:
+        svc, _ = table_service(table, cfg, prm)
+        svc.start()
+        try:
+            svc._publish_health(svc.clock.now())
+            assert svc.health_msg is not None
+            return svc.health_msg
+        finally:
+            svc.close()
+
+    again = started_with(params)
+    assert again["loop"]["misfit"]["recent_above"] == 6 and named[0] in again["problems"]
+    # the empty dipper's median of the last returns too (the swing weighs it light,
+    # beyond the level), the same as before the stop, and named
+    before, after = health["loop"]["empty_dipper"], again["loop"]["empty_dipper"]
+    assert before["returns"] >= 5 and after["median_kg"] == before["median_kg"] < -500.0
+    assert before["beyond"] and after["beyond"]
+    assert [p for p in again["problems"] if "empty dipper" in p] == \
+        [p for p in health["problems"] if "empty dipper" in p] != []
+    recalibrated = dataclasses.replace(params, values=params.values * 1.001)
+    assert recalibrated.fingerprint() != params.fingerprint()
+    fresh = started_with(recalibrated)
+    assert fresh["loop"]["misfit"]["recent"] == 0
+    assert not [p for p in fresh["problems"] if "did not fit" in p]
+    # and the calibration before it is not given back either once another has run
+    assert started_with(params)["loop"]["misfit"]["recent"] == 0
