@@ -17,6 +17,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from shoveld.payload.misfit import MISFIT_RECENT
+
 log = logging.getLogger(__name__)
 
 SCHEMA_VERSION = 3
@@ -85,8 +87,8 @@ class Restored:
     ``RESTORED_EMPTIES``, oldest first), for the same reason."""
 
 
-RESTORED_MISFITS = 10
-"""As many as the engine counts (``shoveld.payload.misfit.MISFIT_RECENT``)."""
+RESTORED_MISFITS = MISFIT_RECENT
+"""As many as the engine counts."""
 RESTORED_EMPTIES = 20
 """More than the engine's median takes (``EngineConfig.empty_returns``, 5 by default):
 it keeps its last ones."""
