@@ -17,8 +17,9 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Writes DIR/index.html (one file a supervisor opens in any browser) and "
                     "the tables as CSV: tonnes per hour, trucks against target and the "
                     "10/10/20 rule, pass payloads and truck fill, cycle times, passes not "
-                    "weighed and why, passes the model did not fit, and the empty dipper "
-                    "weighed on the returns.")
+                    "weighed and why, passes the model did not fit, the empty dipper "
+                    "weighed on the returns, and a calibration that said its model lacks "
+                    "something.")
     add_log_window(p)
     p.add_argument("--out", required=True, metavar="DIR", help="folder to write (created)")
     p.add_argument("--title", default="Shift report")
@@ -27,12 +28,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from shoveld.cli.passes import read_window
-    from shoveld.daemon.persist import read_empties
+    from shoveld.daemon.persist import read_calibration_note, read_empties
     from shoveld.report.figures import shift_figures
     from shoveld.report.write import write_report
 
     rows, path, since, until = read_window(args)
-    figures = shift_figures(rows, since, until, empties=read_empties(path, since, until))
+    figures = shift_figures(rows, since, until, empties=read_empties(path, since, until),
+                            calibration=read_calibration_note(path))
     try:
         page = write_report(figures, Path(args.out), args.title)
     except OSError as e:

@@ -237,6 +237,13 @@ class PassLog:
             "SELECT payload_kg FROM empties WHERE after_pass >= ? "
             "ORDER BY after_pass DESC LIMIT ?", (first, RESTORED_EMPTIES)).fetchall())]
 
+    def note_calibration(self, note: str) -> None:
+        """What the daemon's params say of their own calibration ("" for nothing: the
+        ratio of ``calibrate --verified`` below its level, or none), kept beside their
+        fingerprint so that the shift report says it of the passes weighed with them."""
+        self.con.execute("INSERT OR REPLACE INTO meta(key, value) VALUES "
+                         "('calibration_note', ?)", (note,))
+
     def write_pass(self, p: dict[str, Any], start_unix: float, end_unix: float,
                    target_kg: float, boot_stamp: str | None = None) -> bool:
         """Commit one finished pass (and open its truck); False if it was already there.
@@ -378,6 +385,20 @@ def read_empties(path: str | Path, since_unix: float | None = None,
         d["beyond"] = bool(d["beyond"])
         out.append(d)
     return out
+
+
+def read_calibration_note(path: str | Path) -> tuple[str, int] | None:
+    """The note of the params the daemon last ran with (``PassLog.note_calibration``) and
+    the first pass weighed with them; None when there is no note (nothing to say, or a
+    log written before the thirty-second session)."""
+    con = connect(path, readonly=True)
+    try:
+        meta = dict(con.execute("SELECT key, value FROM meta WHERE key IN "
+                                "('calibration_note', 'params_from_pass')").fetchall())
+    finally:
+        con.close()
+    note, first = meta.get("calibration_note"), meta.get("params_from_pass")
+    return (note, int(first)) if note and first is not None else None
 
 
 @dataclass

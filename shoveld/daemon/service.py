@@ -248,9 +248,10 @@ class Service:
         self.truck_msg = self._truck_msg(self.engine.truck.as_dict(), False)
         log.info("pass log %s: next pass %d, truck %d with %d passes", self.passlog.path,
                  r.next_pass, r.truck, len(r.truck_passes))
-        if self.calibration_above:
-            log.warning("params %s: %s", cfg.params_path,
-                        passes_to_trials_note(self.calibration_above))
+        note = passes_to_trials_note(self.calibration_above)
+        if note:
+            log.warning("params %s: %s", cfg.params_path, note)
+        self.passlog.note_calibration(note)  # for the shift report
         self._persist_thread = threading.Thread(target=self._persist_loop, name="passlog",
                                                 daemon=True)
         self._persist_thread.start()

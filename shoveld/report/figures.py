@@ -49,6 +49,17 @@ class ShiftFigures:
     empties: list[dict[str, Any]] | None = None
     """The empty dipper weighed on the returns (``persist.read_empties``); None: the pass
     log records none (written before 2026-11-29's schema 3)."""
+    calibration: tuple[str, int] | None = None
+    """What the daemon's params said of their own calibration, and the first pass
+    weighed with them (``persist.read_calibration_note``); None: nothing to say."""
+
+    @property
+    def calibration_passes(self) -> list[int]:
+        """This period's passes weighed with the params of ``calibration``."""
+        if self.calibration is None:
+            return []
+        first = self.calibration[1]
+        return [int(p["pass"]) for p in self.passes if int(p["pass"]) >= first]
 
     @property
     def empty_beyond(self) -> list[dict[str, Any]]:
@@ -68,13 +79,14 @@ class ShiftFigures:
 
 def shift_figures(rows: list[dict[str, Any]], since: float | None = None,
                   until: float | None = None,
-                  empties: list[dict[str, Any]] | None = None) -> ShiftFigures:
+                  empties: list[dict[str, Any]] | None = None,
+                  calibration: tuple[str, int] | None = None) -> ShiftFigures:
     """Trucks against their targets, the 10/10/20 rule over the closed ones, tonnes per
     hour, cycle times and invalid passes; the misfits, and the empty-dipper checks."""
     ends = [float(r["end"]) for r in rows]
     since = min(ends) if since is None and ends else (since or 0.0)
     until = max(ends) if until is None and ends else (until or 0.0)
-    f = ShiftFigures(since, until, rows, empties=empties)
+    f = ShiftFigures(since, until, rows, empties=empties, calibration=calibration)
     by_truck: dict[int, Truck] = {}
     closed: dict[int, bool] = {}
     for r in rows:

@@ -199,6 +199,7 @@ def write_report(f: ShiftFigures, out: Path, title: str = "Shift report") -> Pat
     else:
         lines.append("<p>None.</p>")
     lines += _misfit_section(f)
+    lines += _calibration_section(f)
     lines += _empty_section(f, plots.get("empty_dipper"))
     lines.append("<p>Tables: <a href='passes.csv'>passes.csv</a>, <a href='trucks.csv'>"
                  "trucks.csv</a>, <a href='hours.csv'>hours.csv</a>"
@@ -207,6 +208,19 @@ def write_report(f: ShiftFigures, out: Path, title: str = "Shift report") -> Pat
     page = out / "index.html"
     page.write_text("\n".join(lines), encoding="utf-8")
     return page
+
+
+def _calibration_section(f: ShiftFigures) -> list[str]:
+    """The daemon's calibration, when it said the model lacks something (health said it
+    on the cab and the office all along): of which of this period's passes."""
+    got = f.calibration_passes
+    if f.calibration is None or not got:
+        return []
+    note = f.calibration[0]
+    return ["<h2>The calibration</h2>",
+            f"<p id='calibration' class='bad'>{n_of(len(got), 'pass', 'passes')} of this "
+            f"period (pass {got[0]} on) were weighed with params whose calibration said: "
+            f"{html.escape(note)}.</p>"]
 
 
 def _misfit_section(f: ShiftFigures) -> list[str]:

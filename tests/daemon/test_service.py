@@ -426,12 +426,26 @@ def test_a_calibration_whose_verified_passes_fit_worse_is_a_problem_health_names
     screen = ScreenState()
     screen.on_status("t1", status)
     assert said[0] in screen.snapshot()["shovels"][0]["problems"]
+    # and the shift report says it of the passes weighed with those params
+    from shoveld.cli import main
+
+    def report(state: Path) -> str:
+        out = state.parent / "report"
+        assert main(["report", "--state-dir", str(state), "--out", str(out)]) == 0
+        return (out / "index.html").read_text()
+
+    page = report(tmp_path / "state")
+    assert ("<p id='calibration' class='bad'>6 passes of this period (pass 1 on) were weighed "
+            "with params whose calibration said: " + said[0].removeprefix("payload: ")
+            .replace("'", "&#x27;")) in page, page
     # the trials-only calibration of the same machine records no ratio, and health has
-    # nothing of the kind to say (its misfit names the swing, the test above)
+    # nothing of the kind to say (its misfit names the swing, the test above), nor the
+    # report
     _, health, _ = run_to_the_end(table, make_cfg(tmp_path / "trials"), trials_only)
     assert health["loop"]["calibration"] == {"passes_to_trials_rms": None, "warn": 1.5,
                                              "above": {}}
     assert not [p for p in health["problems"] if "calibration's" in p]
+    assert "id='calibration'" not in report(tmp_path / "trials" / "state")
 
 
 def test_a_restart_keeps_the_payload_problems_of_the_same_calibration(

@@ -201,3 +201,39 @@ def test_the_empty_dipper_on_the_returns_is_reported_with_the_daemons_verdict(
     page = (tmp_path / "r2" / "index.html").read_text()
     assert "records no empty-dipper checks" in page and "empties.csv" not in page
     assert not (tmp_path / "r2" / "empties.csv").exists()
+
+
+def test_the_calibration_is_said_of_the_passes_weighed_with_it(tmp_path: Path) -> None:
+    """The daemon keeps what its params say of their calibration, and from which pass it
+    ran with them: the report says it of this period's passes from that one on, and not
+    of a period before it."""
+    db, made = shift(tmp_path)
+    log = PassLog(db, "s1")
+    log.restore("calib-a")  # these params from pass 26 on (the log holds 25)
+    log.note_calibration("the calibration's passes fit worse than its trials (hoist 2.6 "
+                         "times): above 1.5, the model lacks something")
+    t = made[-1]["end"] + 60.0
+    for n in (26, 27):
+        log.write_pass({"pass": n, "truck": 6, "payload_kg": 30000.0, "std_kg": 300.0,
+                        "start_s": t - T0, "end_s": t - T0 + 20, "samples": 500,
+                        "valid": True, "reason": ""}, t, t + 20.0, TARGET)
+        t += 60.0
+    log.close()
+
+    def page(*window: str) -> str:
+        out = tmp_path / f"r{len(window)}"
+        assert main(["report", "--db", str(db), "--out", str(out), *window]) == 0
+        return (out / "index.html").read_text()
+
+    assert len(made) == 25
+    assert ("<p id='calibration' class='bad'>2 passes of this period (pass 26 on) were "
+            "weighed with params whose calibration said: the calibration&#x27;s passes fit "
+            "worse than its trials (hoist 2.6 times): above 1.5, the model lacks "
+            "something.</p>") in page()
+    before = page("--until", str(made[-1]["end"] + 1.0))
+    assert "id='calibration'" not in before and "25 passes" in before
+    # nothing to say: no section
+    log = PassLog(db, "s1")
+    log.note_calibration("")
+    log.close()
+    assert "id='calibration'" not in page()
