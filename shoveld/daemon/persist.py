@@ -216,7 +216,7 @@ class PassLog:
         c = self.con
         row = c.execute("SELECT value FROM meta WHERE key = 'params'").fetchone()
         since = c.execute("SELECT value FROM meta WHERE key = 'params_from_pass'").fetchone()
-        if row is None or row[0] != params or since is None:
+        if row is None or row[0] != params or since is None or not str(since[0]).isdigit():
             c.execute("BEGIN IMMEDIATE")  # these params from the next pass on, both or none
             try:
                 c.execute("INSERT OR REPLACE INTO meta(key, value) VALUES ('params', ?)",
@@ -398,7 +398,9 @@ def read_calibration_note(path: str | Path) -> tuple[str, int] | None:
     finally:
         con.close()
     note, first = meta.get("calibration_note"), meta.get("params_from_pass")
-    return (note, int(first)) if note and first is not None else None
+    if not note or first is None or not str(first).isdigit():
+        return None  # nothing to say, or not the daemon's own record: nothing to trust
+    return note, int(first)
 
 
 @dataclass

@@ -346,3 +346,22 @@ def test_restore_carries_on_the_checks_of_the_same_params_only(tmp_path: Path) -
     r = PassLog(path, "s1").restore()
     assert (r.recent_misfits, r.empty_checks, r.next_pass) == ([], [], 15)
     assert not audit_log(path).problems
+
+
+def test_a_meta_record_that_is_not_the_daemons_is_not_trusted(tmp_path: Path) -> None:
+    """A pass log whose record of the params' first pass was edited into something else:
+    the restore starts those params afresh (and writes the record again), and the report
+    has no calibration to say, rather than a traceback."""
+    from shoveld.daemon.persist import read_calibration_note
+
+    path = db_path(tmp_path)
+    log = PassLog(path, "s1")
+    log.restore("calib-a")
+    log.note_calibration("the model lacks something")
+    assert read_calibration_note(path) == ("the model lacks something", 1)
+    log.con.execute("UPDATE meta SET value = 'x' WHERE key = 'params_from_pass'")
+    assert read_calibration_note(path) is None
+    r = log.restore("calib-a")
+    assert (r.recent_misfits, r.empty_checks) == ([], [])
+    assert read_calibration_note(path) == ("the model lacks something", 1)
+    log.close()
