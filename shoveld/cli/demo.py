@@ -108,7 +108,11 @@ def calibrate_demo(out: Path) -> Path:
 
 
 def _port_free(port: int) -> bool:
+    """Whether nothing listens on ``port``: bound as Zenoh binds its listener (with
+    ``SO_REUSEADDR``), so the last demo's connections waiting out their TIME_WAIT do not
+    read as a port in use."""
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             s.bind(("127.0.0.1", port))
         except OSError:

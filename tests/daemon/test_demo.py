@@ -5,6 +5,8 @@ from __future__ import annotations
 import subprocess
 import sys
 
+import pytest
+
 from .conftest import free_port
 
 
@@ -33,3 +35,28 @@ def test_demo_refuses_a_busy_port() -> None:
         r = subprocess.run([sys.executable, "-m", "shoveld", "demo", "--port", str(port)],
                            capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "in use" in r.stderr
+
+
+def test_a_port_whose_last_connections_wait_out_their_time_wait_is_free() -> None:
+    """Two demos one after the other: the first one's closed connections stay in TIME_WAIT
+    for a minute, and the second must not take them for a daemon listening there (Zenoh
+    binds with SO_REUSEADDR); a socket listening there is still a port in use."""
+    import socket
+
+    from shoveld.cli.demo import _port_free
+
+    listener = socket.socket()
+    listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as Zenoh's listener
+    listener.bind(("127.0.0.1", 0))
+    listener.listen()
+    port = listener.getsockname()[1]
+    client = socket.create_connection(("127.0.0.1", port))
+    served, _ = listener.accept()
+    assert not _port_free(port)
+    served.close()  # the side that closes first waits out TIME_WAIT
+    client.close()
+    listener.close()
+    with socket.socket() as plain:  # what the check did before: refused
+        with pytest.raises(OSError):
+            plain.bind(("127.0.0.1", port))
+    assert _port_free(port)
