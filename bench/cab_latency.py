@@ -32,16 +32,13 @@ def main() -> None:
     import zenoh
 
     from shoveld.cli.cab import TOPICS, CabClient
+    from shoveld.daemon.publisher import zenoh_config
     from shoveld.web.browser import open_browser
     from shoveld.web.server import ThreadedScreen
     from shoveld.web.state import ScreenState
 
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"peer"')
-    conf.insert_json5("listen/endpoints", json.dumps([endpoint]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    pub_session = zenoh.open(conf)
+    pub_session = zenoh.open(zenoh_config("peer", [endpoint]))
     state = ScreenState()
     cab = CabClient(state, [endpoint], "client", "b1", topics=TOPICS | {"joints"})
     state.set_link("up", endpoint)

@@ -76,12 +76,9 @@ for s in servers:
     threading.Thread(target=echo, args=(s,), daemon=True).start()
 threading.Thread(target=stream, args=(laser_w, laser_hz, laser_n), daemon=True).start()
 if len(sys.argv) > 8:  # a Zenoh endpoint: subscribe to what the loop puts, like a cab
-    import json, zenoh
-    c = zenoh.Config()
-    c.insert_json5("mode", '"client"')
-    c.insert_json5("connect/endpoints", json.dumps([sys.argv[8]]))
-    c.insert_json5("scouting/multicast/enabled", "false")
-    session = zenoh.open(c)
+    import zenoh
+    from shoveld.daemon.publisher import zenoh_config
+    session = zenoh.open(zenoh_config("client", (), [sys.argv[8]]))
     sub = session.declare_subscriber("floor/**", lambda sample: None)
     print("subscribed", flush=True)
 stream(mti_w, mti_hz, mti_n)
@@ -173,12 +170,10 @@ def one_run(shape: str, seconds: float, puts: int = 0) -> tuple[float, float]:
     if shape == "threads+puts":
         import zenoh
 
+        from shoveld.daemon.publisher import zenoh_config
+
         endpoint = f"tcp/127.0.0.1:{free_port()}"
-        c = zenoh.Config()
-        c.insert_json5("mode", '"peer"')
-        c.insert_json5("listen/endpoints", json.dumps([endpoint]))
-        c.insert_json5("scouting/multicast/enabled", "false")
-        session = zenoh.open(c)
+        session = zenoh.open(zenoh_config("peer", [endpoint]))
         argv.append(endpoint)
     child = subprocess.Popen(argv, pass_fds=(mti_w, laser_w), stdout=subprocess.PIPE,
                              text=True)
