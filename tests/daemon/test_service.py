@@ -286,6 +286,24 @@ def machine_and_params() -> tuple[Machine, ModelParams]:
     return calibrated_machine()
 
 
+def swing_effects() -> list[Any]:
+    """A swing the model lacks: the arm and the load thrown outward as the house turns,
+    2.5 m from its axis, the bottom of the effect's range."""
+    from shoveld.sim.effects import make_effects
+
+    return make_effects({"swing_centrifugal": 2.5}, form="bench")
+
+
+@pytest.fixture(scope="module")
+def swinging_table(machine_and_params: tuple[Machine, ModelParams]) -> SignalsTable:
+    """Six passes of 3-35 t on that machine, swinging (fresh effects, as every use had)."""
+    from shoveld.sim.scenario import simulate_cycles
+
+    return simulate_cycles(6, 2005, machine=machine_and_params[0],
+                           payload_range=(3000.0, 35000.0), truck_target_kg=None,
+                           effects=swing_effects()).table
+
+
 def run_to_the_end(table: SignalsTable, cfg: Any, params: ModelParams
                    ) -> tuple[list[dict[str, Any]], dict[str, Any], dict[str, Any]]:
     """The whole table through the service on a simulated clock: its pass messages, then
@@ -348,21 +366,16 @@ def test_an_empty_dipper_weighed_heavy_on_the_returns_is_a_problem_health_names(
 
 
 def test_a_machine_the_model_does_not_fit_is_a_problem_health_names(
-        tmp_path: Path, machine_and_params: tuple[Machine, ModelParams]) -> None:
+        tmp_path: Path, machine_and_params: tuple[Machine, ModelParams],
+        swinging_table: SignalsTable) -> None:
     """A swing the model lacks (the arm and the load thrown outward as the house turns,
     2.5 m from its axis, the bottom of the effect's range) puts every pass above the level,
     though the trials, which do not swing, calibrate the machine as well as without it:
     each pass is marked, and from the fifth health says the model does not fit this
     machine, for the cab and the office, and what names the cause."""
-    from shoveld.sim.effects import make_effects
-    from shoveld.sim.scenario import simulate_cycles
-
-    machine, params = machine_and_params
-    table = simulate_cycles(6, 2005, machine=machine, payload_range=(3000.0, 35000.0),
-                            truck_target_kg=None,
-                            effects=make_effects({"swing_centrifugal": 2.5}, form="bench")).table
+    _, params = machine_and_params
     cfg = make_cfg(tmp_path)
-    passes, health, status = run_to_the_end(table, cfg, params)
+    passes, health, status = run_to_the_end(swinging_table, cfg, params)
     assert len(passes) == 6 and all(m["valid"] and m["misfit_high"] for m in passes), passes
     assert min(m["misfit"] for m in passes) > 3.0
     fit = health["loop"]["misfit"]
@@ -381,7 +394,8 @@ def test_a_machine_the_model_does_not_fit_is_a_problem_health_names(
 
 
 def test_a_calibration_whose_verified_passes_fit_worse_is_a_problem_health_names(
-        tmp_path: Path, machine_and_params: tuple[Machine, ModelParams]) -> None:
+        tmp_path: Path, machine_and_params: tuple[Machine, ModelParams],
+        swinging_table: SignalsTable) -> None:
     """The same swing the model lacks, calibrated with verified passes as well as the
     trials: the calibration's noise takes the swing in, so the passes' misfit, read
     against it, marks fewer of them (4 of 6 here, 6 of 6 with the trials' noise) and the
@@ -390,11 +404,10 @@ def test_a_calibration_whose_verified_passes_fit_worse_is_a_problem_health_names
     that record and names it in health, for the cab and the office, from the start."""
     from shoveld.diagnose.fit import calibrate_with_verified
     from shoveld.model.model import Model
-    from shoveld.sim.effects import make_effects
     from shoveld.sim.scenario import simulate_calibration, simulate_cycles
 
     machine, trials_only = machine_and_params
-    swing = {"effects": make_effects({"swing_centrifugal": 2.5}, form="bench")}
+    swing = {"effects": swing_effects()}
     trials = [simulate_calibration(kg, 2010 + k, machine=machine, **swing).table
               for k, kg in ((1, 0.0), (2, 8420.0))]
     verified = simulate_cycles(6, 2013, machine=machine, verified_fraction=1.0,
@@ -405,10 +418,7 @@ def test_a_calibration_whose_verified_passes_fit_worse_is_a_problem_health_names
     assert params is not None and used == 6
     ratio = params.fit["passes_to_trials_rms"]
     assert max(ratio.values()) > 1.5, ratio
-    # the same table as the test above (fresh effects, as there)
-    table = simulate_cycles(6, 2005, machine=machine, payload_range=(3000.0, 35000.0),
-                            truck_target_kg=None,
-                            effects=make_effects({"swing_centrifugal": 2.5}, form="bench")).table
+    table = swinging_table  # the same as the test above's
     passes, health, status = run_to_the_end(table, make_cfg(tmp_path), params)
     assert len(passes) == 6
     fit = health["loop"]["misfit"]
@@ -449,18 +459,14 @@ def test_a_calibration_whose_verified_passes_fit_worse_is_a_problem_health_names
 
 
 def test_a_restart_keeps_the_payload_problems_of_the_same_calibration(
-        tmp_path: Path, machine_and_params: tuple[Machine, ModelParams]) -> None:
+        tmp_path: Path, machine_and_params: tuple[Machine, ModelParams],
+        swinging_table: SignalsTable) -> None:
     """The machine whose swing the model lacks, stopped after six marked passes and
     started again: health names the model's misfit at once, from the pass log, where it
     would have waited for five more passes; started with other params (a new
     calibration), it starts afresh."""
-    from shoveld.sim.effects import make_effects
-    from shoveld.sim.scenario import simulate_cycles
-
-    machine, params = machine_and_params
-    table = simulate_cycles(6, 2005, machine=machine, payload_range=(3000.0, 35000.0),
-                            truck_target_kg=None,
-                            effects=make_effects({"swing_centrifugal": 2.5}, form="bench")).table
+    _, params = machine_and_params
+    table = swinging_table
     cfg = make_cfg(tmp_path)
     _, health, _ = run_to_the_end(table, cfg, params)
     named = [p for p in health["problems"] if "did not fit 6 of the last 6" in p]
