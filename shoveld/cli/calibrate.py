@@ -162,10 +162,9 @@ def _warn_passes_to_trials(cal: Calibrator) -> None:
     the model lacks something operation excites, and the daemon's misfit, read against
     this calibration's noise, will not see it (``PASSES_TO_TRIALS_WARN``). The ratio is
     recorded with the params, so ``check-config`` and the daemon's health say it too."""
-    from shoveld.payload.misfit import passes_to_trials_above, passes_to_trials_note
+    from shoveld.payload.misfit import calibration_note
 
-    fit = cal.params_.fit if cal.params_ else {}
-    note = passes_to_trials_note(passes_to_trials_above(fit.get("passes_to_trials_rms")))
+    note = calibration_note(cal.params_.fit if cal.params_ else {})
     if note:
         print(f"warning: {note}", file=sys.stderr)
 

@@ -45,11 +45,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"{args.config}: OK")
     print(f"  shovel {cfg.shovel_id}: loop {cfg.loop.rate_hz:g} Hz, state {cfg.state_dir}")
     if params is not None:
-        from shoveld.payload.misfit import passes_to_trials_above, passes_to_trials_note
+        from shoveld.payload.misfit import calibration_note
 
         print(f"  params {cfg.params_path}: terms {', '.join(params.terms)}")
-        lacks = passes_to_trials_note(passes_to_trials_above(
-            params.fit.get("passes_to_trials_rms")))
+        lacks = calibration_note(params.fit)
         if lacks:  # the file is usable, its model is short of something: said, not refused
             print(f"    warning: {lacks}")
     z = cfg.zenoh

@@ -74,6 +74,12 @@ def passes_to_trials_above(ratio: object, warn: float = PASSES_TO_TRIALS_WARN
             if isinstance(r, int | float) and r > warn}
 
 
+def calibration_note(fit: dict[str, object]) -> str:
+    """What a params file's fit record (``ModelParams.fit``) says of its calibration, for
+    ``calibrate`` and ``check-config`` ("" when nothing)."""
+    return passes_to_trials_note(passes_to_trials_above(fit.get("passes_to_trials_rms")))
+
+
 def passes_to_trials_note(above: dict[str, float], warn: float = PASSES_TO_TRIALS_WARN) -> str:
     """What ``calibrate``, ``check-config`` and the daemon's health say of a calibration
     whose verified passes fit worse than its trials ("" when none is above ``warn``)."""

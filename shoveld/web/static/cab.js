@@ -74,7 +74,7 @@ function render(snap) {
 
 function showProblems(probs, whole) {
   const h = $("health");
-  h.textContent = probs.length ? probs.map(p => whole ? p : screen.head(p) + (screen.head(p) === p ? "" : " …")).join(" · ") : "all sensors ok";
+  h.textContent = probs.length ? probs.map(p => screen.shown(p, whole)).join(" · ") : "all sensors ok";
   h.title = whole ? "" : probs.join("\n");
   h.className = probs.length ? "bad" : "ok";
 }

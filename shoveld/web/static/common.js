@@ -31,6 +31,11 @@ const screen = {
     const j = i < 0 ? -1 : p.indexOf(": ", i + 2);
     return j < 0 ? p : p.slice(0, j);
   },
+  // A problem as shown: whole, or its head with " …" when something was cut.
+  shown(p, whole) {
+    const h = whole ? p : screen.head(p);
+    return h === p ? p : h + " …";
+  },
   // Whether the page runs off the screen, or a panel of it scrolls (the cab's panels do
   // rather than push the page, on the 10-inch panels).
   overflows() {
