@@ -12,7 +12,7 @@ import csv
 import io
 import itertools
 import math
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO
@@ -191,12 +191,14 @@ def _read(spath: str, f: Any) -> SignalsTable:
     prev: tuple[float, int] | None = None  # the last row's time and line
     first = header_line + 1
     while True:
-        chunk = [ln.rstrip("\r\n") for ln in itertools.islice(f, CHUNK_ROWS)]
+        # the lines as read, ends and all: the fast path takes them so (numpy drops the
+        # ends), and only the cell-by-cell reader needs them stripped
+        chunk = list(itertools.islice(f, CHUNK_ROWS))
         if not chunk:
             break
         arr, last = _fast_chunk(chunk, prev)
         if arr is None:
-            arr, last = _slow_chunk(spath, chunk, first, prev)
+            arr, last = _slow_chunk(spath, [ln.rstrip("\r\n") for ln in chunk], first, prev)
         else:
             last = (float(arr[-1, 0]), first + len(chunk) - 1) if len(arr) else prev
         columns.append(arr)
@@ -241,26 +243,29 @@ _HI = np.array([BY_NAME[n].hi for n in COLUMN_NAMES])
 
 def _fast_chunk(chunk: list[str], prev: tuple[float, int] | None
                 ) -> tuple[np.ndarray | None, tuple[float, int] | None]:
-    """A chunk of plain numbers in one numpy call (two if a blank is inside a row), checked
-    column-wise; None: let the cell-by-cell parser read it (and name the fault, if any)."""
+    """A chunk of plain numbers (its lines as read, with their ends) in one numpy call,
+    two if a blank is inside a row, checked column-wise; None: let the cell-by-cell
+    parser read it (and name the fault, if any)."""
     ncol = len(COLUMN_NAMES)
-    block = "\n".join(chunk)
     # numpy would take "nan" and "inf" for numbers; the table writes unknowns as blanks, so
     # such a cell goes to the cell-by-cell reader, which refuses it by name. Anything else
     # that is not a number (a word, a quote, a short row) makes numpy refuse the chunk, and
-    # a blank line makes its shape wrong: the same.
+    # a blank line (which numpy skips) makes its shape wrong: the same.
+    block = "".join(chunk)
     if "n" in block or "N" in block:
         return None, prev
     # A blank cell is unknown: NaN. Most tables leave blanks only in the last column
-    # (payload_kg, known on few rows): fill those line by line and give loadtxt the list of
-    # lines, which it parses in three quarters of the time it takes over a StringIO of the
-    # same text (with the four str.replace passes below: half). A blank elsewhere leaves an
-    # empty cell, which loadtxt refuses: then fill them all and try again.
-    arr = _loadtxt([ln + "nan" if ln.endswith(",") else ln for ln in chunk])
+    # (payload_kg, known on few rows): loadtxt reads that column through a converter that
+    # takes a blank for NaN, from the list of lines as read - a fifth less time than
+    # filling the blanks line by line first, a third less than parsing the same text from
+    # a StringIO. A blank elsewhere leaves an empty cell, which loadtxt refuses: then fill
+    # them all and try again.
+    arr = _loadtxt(chunk, converters={ncol - 1: _blank_is_nan})
     if arr is None:
         # str.replace, not a regular expression: ten times faster; twice, because ",,,"
         # holds two blanks that share a comma.
-        filled = ("\n" + block + "\n").replace("\n,", "\nnan,").replace(",\n", ",nan\n")
+        lines = "\n".join(ln.rstrip("\r\n") for ln in chunk)
+        filled = ("\n" + lines + "\n").replace("\n,", "\nnan,").replace(",\n", ",nan\n")
         filled = filled.replace(",,", ",nan,").replace(",,", ",nan,")
         arr = _loadtxt(io.StringIO(filled))
     if arr is None or arr.shape != (len(chunk), ncol) or np.isnan(arr[:, 0]).any():
@@ -274,10 +279,18 @@ def _fast_chunk(chunk: list[str], prev: tuple[float, int] | None
     return arr, None
 
 
-def _loadtxt(lines: Iterable[str] | io.StringIO) -> np.ndarray | None:
+def _blank_is_nan(cell: str) -> float:
+    """The last column's cell: blank is unknown (NaN); anything else as ``float`` reads it
+    (what is not a number raises, and the chunk goes to the cell-by-cell reader)."""
+    return float(cell) if cell else math.nan
+
+
+def _loadtxt(lines: Iterable[str] | io.StringIO,
+             converters: dict[int, Callable[[str], float]] | None = None) -> np.ndarray | None:
     """numpy's parser on plain comma-separated numbers; None if it refuses them."""
     try:
-        return np.loadtxt(lines, delimiter=",", dtype=float, ndmin=2, comments=None)
+        return np.loadtxt(lines, delimiter=",", dtype=float, ndmin=2, comments=None,
+                          converters=converters)
     except ValueError:
         return None
 

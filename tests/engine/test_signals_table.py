@@ -194,9 +194,9 @@ def _read_both(text: str, chunk_rows: int) -> tuple[object, object]:
 @given(st.data())
 def test_the_fast_path_and_the_cell_by_cell_path_agree_on_any_rows(data: st.DataObject) -> None:
     """Rows of numbers in the writer's and other spellings, blanks anywhere (the fast path
-    fills a row-end blank line by line and any other blank in a second try), and now and
-    then a cell or a row that must be refused: the same table or the same error, whatever
-    the chunk size (several chunks grow the columns)."""
+    reads a row-end blank through numpy's converter and any other blank in a second try),
+    and now and then a cell or a row that must be refused: the same table or the same
+    error, whatever the chunk size (several chunks grow the columns)."""
     from shoveld.signals.columns import COLUMNS
     from shoveld.signals.table import _fmt
 
@@ -237,8 +237,9 @@ def test_the_fast_path_and_the_cell_by_cell_path_agree_on_any_rows(data: st.Data
 
 
 def test_rows_with_blank_ends_and_inner_blanks_in_one_chunk() -> None:
-    """The two fills of the fast path: row ends only (line by line), then a blank inside
-    a row (the whole chunk again); the same table as cell by cell."""
+    """The two tries of the fast path: row-end blanks only (numpy's converter of the last
+    column), then a blank inside a row (the whole chunk filled); the same table as cell by
+    cell."""
     body = [ROW.format(t=k * 0.02) for k in range(6)]
     body[4] = body[4].replace(",30,45,", ",,45,")
     fast, slow = _read_both(HEADER + "\n" + "\n".join(body) + "\n", 20_000)
