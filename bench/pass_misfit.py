@@ -16,7 +16,9 @@ passes:
 * ``--effects``: each simulated hidden effect alone at the bottom and the top of its
   typical range on ``bench/diagnose_matrix.py``'s machines (seeds 1, 2; 24 passes), the
   base model calibrated on the effect's own trials: the misfit's median and spread, and
-  how many passes are above the daemon's level (the cab marks them); with ``--extend``
+  how many passes are above the daemon's level (the cab marks them), and how many the
+  engine would not weigh with the crowd in doubt before every pass (``doubt_refusals``,
+  the worst case of ``CrowdDoubt``; ``--machines`` prints it too); with ``--extend``
   (``run_extended``), identified four ways (the base model and the one extended by the
   effect's own term, each on the trials alone and on the trials plus verified passes)
   and judged on a fresh session: whether the marks go;
@@ -43,6 +45,26 @@ from pathlib import Path
 from typing import Any
 
 from shoveld.payload.misfit import MISFIT_WARN
+
+
+def doubt_refusals(misfits: list[float]) -> int:
+    """The passes the engine would not weigh if the crowd were in doubt before every one
+    of them (the worst case of ``CrowdDoubt``: a laser gap before each pass): each judged
+    against ``DOUBT_FACTOR`` times the median of the last passes weighed before it."""
+    from collections import deque
+
+    from shoveld.engine.loop import DOUBT_FACTOR
+
+    fits: deque[float] = deque(maxlen=10)
+    refused = 0
+    for m in misfits:
+        if not math.isfinite(m):
+            continue
+        if fits and m > max(MISFIT_WARN, DOUBT_FACTOR * statistics.median(fits)):
+            refused += 1
+        else:
+            fits.append(m)
+    return refused
 
 
 def spread(xs: list[float]) -> str:
@@ -90,6 +112,7 @@ def run_machines(n: int) -> None:
         every: list[float] = []
         empty: list[float] = []
         medians: list[float] = []
+        doubt = 0
         for seed in range(1, n + 1):
             machine = Machine.draw(seed) if kind == "realistic" else Machine.ideal()
             res = simulate_cycles(60, seed=10 * seed + 3, machine=machine,
@@ -97,9 +120,11 @@ def run_machines(n: int) -> None:
             cfg = EngineConfig(**pa.ENGINE)
             est = estimate_table(res.table, pa.calibrate(machine, seed, "output"), cfg)
             every.extend(p.misfit for p in est.passes)
+            doubt += doubt_refusals([p.misfit for p in est.passes])
             empty.extend(e.payload_kg for e in est.empties)
             medians.extend(abs(e.median_kg) for e in est.empties[cfg.empty_returns - 1:])
-        print(f"  {kind:10s} {len(every):5d} passes  {spread(every)}")
+        print(f"  {kind:10s} {len(every):5d} passes  {spread(every)}  not weighed with "
+              f"the crowd in doubt before every pass: {doubt}")
         print(f"  {kind:10s} {len(empty):5d} returns  empty dipper {min(empty):+.0f} to "
               f"{max(empty):+.0f} kg, median of five at most {max(medians):.0f} kg",
               flush=True)
@@ -131,14 +156,17 @@ def run_effects(extend: bool, only: list[str]) -> None:
             every: list[float] = []
             errs: list[float] = []
             empty: list[float] = []
+            doubt = 0
             for seed in (1, 2):
                 calib, ops = simulate_session({name: size}, seed, 24)
                 est = estimate_table(ops.table,
                                      Calibrator(method="output").fit(calib).params_)
                 every.extend(p.misfit for p in est.passes)
+                doubt += doubt_refusals([p.misfit for p in est.passes])
                 errs.extend(pass_errors(est, ops))
                 empty.extend(e.payload_kg for e in est.empties)
-            print(effect_line(name, size, "", every, errs, empty), flush=True)
+            print(effect_line(name, size, "", every, errs, empty)
+                  + f"  in doubt: {doubt}", flush=True)
 
 
 def effect_line(name: str, size: float, label: str, every: list[float], errs: list[float],
@@ -177,6 +205,7 @@ def run_extended(only: list[str]) -> None:
     for name in sorted(only or EFFECT_TERMS):
         for size in SIM_EFFECTS[name].typical_range:
             got: dict[str, tuple[list[float], list[float], list[float]]] = {}
+            doubt: dict[str, int] = {}
             for seed in (1, 2):
                 calib, ops = simulate_session({name: size}, seed, 24)
                 held = simulate_cycles(24, 1000 * seed + 4, payload_range=(3000.0, 35000.0),
@@ -198,8 +227,11 @@ def run_extended(only: list[str]) -> None:
                     every.extend(p.misfit for p in est.passes)
                     errs.extend(pass_errors(est, held))
                     empty.extend(e.payload_kg for e in est.empties)
+                    doubt[label] = doubt.get(label, 0) + doubt_refusals(
+                        [p.misfit for p in est.passes])
             for label, (every, errs, empty) in got.items():
-                print(effect_line(name, size, label, every, errs, empty), flush=True)
+                print(effect_line(name, size, label, every, errs, empty)
+                      + f"  in doubt: {doubt[label]}", flush=True)
 
 
 DRIFTS: dict[str, dict[str, float]] = {

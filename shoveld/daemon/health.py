@@ -130,6 +130,15 @@ def problems(drivers: Mapping[str, dict[str, Any]], loop: dict[str, Any],
         # which took the missing term in (docs/engine.md, "The calibration's own check")
         out.append("payload: " + passes_to_trials_note(cal["above"],
                                                       cal.get("warn", PASSES_TO_TRIALS_WARN)))
+    doubt = loop.get("crowd_doubt")
+    if isinstance(doubt, dict) and doubt.get("refusing") and doubt.get("doubt"):
+        # a gap alone is common (the laser's dust, a reconnect); passes that stop fitting
+        # after it are not weighed until one fits again (docs/engine.md, "A crowd in doubt")
+        out.append(f"payload: {n_of(doubt['refusing'], 'pass', 'passes')} not weighed since the "
+                   f"crowd laser {doubt['doubt']}: the model does not fit them as it fitted "
+                   f"this machine (misfit {doubt.get('last') or 0:.0f} against its usual "
+                   f"{doubt.get('usual') or 0:.2f}); the laser may see something other than "
+                   "the handle: check its beam and target")
     empty = loop.get("empty_dipper")
     if isinstance(empty, dict) and empty.get("beyond") and empty.get("median_kg") is not None:
         # a calibration (or model) fault the passes may share, by less or more than the

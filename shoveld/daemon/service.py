@@ -558,6 +558,14 @@ class Service:
                 "median_kg": round(e.empty_median, 1) if checks else None,
                 "of_last": e.cfg.empty_returns, "beyond": e.empty_beyond,
                 "checks_beyond": e.empty_warned}
+            # the crowd in doubt since its laser lost the handle (docs/engine.md, "A crowd
+            # in doubt"): the passes in a row not weighed for it, and what the laser did
+            d = e.crowd_doubt
+            loop["crowd_doubt"] = {
+                "doubt": None if d is None else d.what, "usual": None if d is None else
+                round_misfit(d.usual), "limit": None if d is None else round_misfit(d.limit),
+                "refusing": e.doubt_refusing, "last": round_misfit(e.doubt_last_misfit),
+                "passes_refused": e.doubt_refused}
         zen = self.publisher.health()
         persist = {"passes_written": self.passes_written, "queue": self._q.qsize(),
                    "last_error": self.persist_error}

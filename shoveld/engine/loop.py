@@ -13,7 +13,7 @@ import logging
 import math
 from collections import deque
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -86,6 +86,36 @@ it: about 6 s of lift and swing at 100 Hz, so a long pass holds a bounded memory
 NEEDED = ("handle_deg", "crowd_m", "hoist1_a", "hoist2_a", "hoist_field_a", "crowd_a")
 """Signals without which a payload update is not made."""
 
+CROWD_GAP_S = 0.2
+"""The crowd's reading missing this long (the laser silent, reconnected, or seeing no
+target) leaves what it reads next unconfirmed (:class:`CrowdDoubt`): the handle moves up
+to 3 m/s, so after a gap the driver cannot tell something on the handle within that reach
+from the handle itself (docs/drivers-ar4000.md, "A reconnect keeps the handle's reach")."""
+DOUBT_FACTOR = 10.0
+"""While the crowd is unconfirmed, a pass whose misfit is above this many times the
+machine's usual (the median of the last passes' before the doubt, and at least
+``misfit_warn``) is not weighed: something on the handle put the committed capture's
+passes at 26-578 where they had 0.84, a swing the model lacks spreads one machine's
+passes over 4.6-59 around a median of 18 (docs/engine.md, "A pass's misfit")."""
+
+
+@dataclass(frozen=True)
+class CrowdDoubt:
+    """The crowd's laser lost the handle (a gap of ``CROWD_GAP_S``, a change of target):
+    until a pass fits the machine as its passes did before, the laser may be reading
+    something else on the handle, which only the pass's misfit can show."""
+
+    what: str
+    """What happened, as the refused pass's reason says it ("had no reading for 2.0 s")."""
+    t: float
+    """When (engine seconds)."""
+    limit: float
+    """The misfit above which a pass is not weighed while the doubt lasts."""
+    usual: float
+    """The machine's usual misfit it was set from (the median of the last passes')."""
+    weight: float
+    """How bad the cause is: infinite for a change of target, else the gap's seconds."""
+
 
 @dataclass(frozen=True)
 class EngineConfig:
@@ -127,7 +157,8 @@ class EngineConfig:
     stuck. 0: no such test."""
     misfit_warn: float = MISFIT_WARN
     """A pass whose misfit is above this is logged as a warning, and still weighed
-    (:data:`shoveld.payload.misfit.MISFIT_WARN`, where the figures are)."""
+    (:data:`shoveld.payload.misfit.MISFIT_WARN`, where the figures are), unless the crowd
+    is in doubt (:class:`CrowdDoubt`), where this is the least level of refusal."""
     empty_warn_kg: float = 500.0
     """The empty dipper weighed on its returns (:class:`EmptyCheck`): when the median of
     the last ``empty_returns`` is further than this from zero, the daemon warns that the
@@ -279,6 +310,21 @@ class Engine:
         """The last finished pass's misfit (NaN: none yet, or no sample in it)."""
         self.recent_misfits: deque[bool] = deque(maxlen=MISFIT_RECENT)
         """Whether each of the last passes with a sample was above ``misfit_warn``."""
+        self.fits: deque[float] = deque(maxlen=MISFIT_RECENT)
+        """The misfits of the last passes weighed while the crowd was not in doubt: the
+        machine's usual, which a :class:`CrowdDoubt` is judged against."""
+        self.crowd_doubt: CrowdDoubt | None = None
+        """Set when the crowd's laser lost the handle, cleared by a pass that fits."""
+        self.doubt_refused = 0
+        """Passes not weighed for a crowd in doubt, since the start."""
+        self.doubt_refusing = 0
+        """Of those, the passes in a row not weighed for the doubt there is now (health
+        names it while it lasts: a gap alone is common, a pass refused is not)."""
+        self.doubt_last_misfit = math.nan
+        """The misfit of the last pass not weighed for it."""
+        self._crowd_t = math.nan
+        """The last tick with a crowd reading (NaN: none yet, and a start is no gap;
+        minus infinity after :meth:`carry_on`, whose restart is one)."""
         self.rls_empty: PayloadRls | None = None
         """The empty dipper's filter while it returns (:class:`EmptyCheck`)."""
         self.return_start = math.nan
@@ -334,12 +380,20 @@ class Engine:
             z_th = math.nan if "handle_deg" in bad else s.handle_deg * _RAD
             z_d = math.nan if "crowd_m" in bad else s.crowd_m
             z_sw = math.nan if "swing_deg" in bad else s.swing_deg * _RAD
-            if CROWD_TARGET_CHANGED in bad and self.rls is not None:
-                self.target_changed_t = t
+            if CROWD_TARGET_CHANGED in bad:
+                self._doubt_crowd("took another target", t, math.inf)
+                if self.rls is not None:
+                    self.target_changed_t = t
         else:
             z_th, z_d, z_sw = s.handle_deg * _RAD, s.crowd_m, s.swing_deg * _RAD
         th, thd, thdd, d, dd, ddd, sw, swd, swdd = update_joints(
             self.f_th, self.f_d, self.f_sw, t, z_th, z_d, z_sw)
+        if z_d == z_d:  # a crowd reading, after a gap?
+            if t - self._crowd_t > CROWD_GAP_S:  # False for the first (NaN)
+                gap = t - self._crowd_t
+                self._doubt_crowd(f"had no reading for {gap:.1f} s" if gap < math.inf
+                                  else "went unread while the daemon was stopped", t, gap)
+            self._crowd_t = t
         if z_d < self._crowd_lo:  # False for NaN
             self._crowd_lo = z_d
         if z_d > self._crowd_hi:
@@ -421,8 +475,46 @@ class Engine:
         the empty dipper's last weights."""
         self.recent_misfits.extend(m > self.cfg.misfit_warn for m in misfits
                                    if math.isfinite(m))
+        self.fits.extend(m for m in misfits if math.isfinite(m))
+        if self.fits and self._crowd_t != self._crowd_t:
+            # the handle went unwatched while the daemon was down: its first reading is
+            # in doubt, as after a gap (a start without this machine's usual cannot be)
+            self._crowd_t = -math.inf
         checks = self.empty_checks = list(empties)[-max(1, self.cfg.empty_returns):]
         self.empty_median = float(np.median(checks)) if checks else math.nan
+
+    def _doubt_crowd(self, what: str, t: float, weight: float) -> None:
+        """The crowd's laser lost the handle at ``t``: judge the passes from here against
+        the machine's usual misfit, if it has one (a machine with no pass fitted yet
+        has nothing to be judged against, and is weighed as before). A doubt already
+        there names the worst of its causes (``weight``: a change of target, else the
+        longest gap); its level stays, as no pass has fitted since."""
+        old = self.crowd_doubt
+        if old is not None:
+            if weight >= old.weight:
+                self.crowd_doubt = replace(old, what=what, t=t, weight=weight)
+            return
+        if not self.fits:
+            return
+        usual = float(np.median(self.fits))
+        self.crowd_doubt = CrowdDoubt(what, t, max(self.cfg.misfit_warn, DOUBT_FACTOR * usual),
+                                      usual, weight)
+
+    def _doubt_reason(self, doubt: CrowdDoubt, misfit: float) -> str:
+        """Why a pass is not weighed for a crowd in doubt (logged now and then)."""
+        self.doubt_refused += 1
+        self.doubt_refusing += 1
+        self.doubt_last_misfit = misfit
+        when = ("in this pass" if doubt.t >= self.pass_start
+                else f"{self.pass_start - doubt.t:.0f} s before this pass")
+        if _now_and_then(self.doubt_refused):
+            log.warning("pass %d not weighed: the crowd laser %s %s, and its misfit %.1f is "
+                        "above %.1f (%g times the machine's usual %.2f); %s so far",
+                        self.pass_index, doubt.what, when, misfit, doubt.limit, DOUBT_FACTOR,
+                        doubt.usual, n_of(self.doubt_refused, "such pass", "such passes"))
+        return (f"the crowd laser {doubt.what} {when} and the model does not fit the pass "
+                f"(misfit {misfit:.0f}, the machine's usual {doubt.usual:.2f}): the laser may "
+                "see something other than the handle")
 
     @property
     def empty_beyond(self) -> bool:
@@ -545,6 +637,19 @@ class Engine:
         else:
             reason = ""
         misfit = self.last_misfit = rls.misfit
+        if valid and math.isfinite(misfit):
+            doubt = self.crowd_doubt
+            if doubt is None:
+                self.fits.append(misfit)
+            elif misfit > doubt.limit:
+                valid = False
+                reason = self._doubt_reason(doubt, misfit)
+            elif doubt.t <= self.pass_start:
+                # a whole pass read since the doubt fits: the laser is on the handle (a
+                # pass the doubt came in may have fitted on its readings before it)
+                self.crowd_doubt = None
+                self.doubt_refusing = 0
+                self.fits.append(misfit)
         if math.isfinite(misfit):
             self.recent_misfits.append(misfit > self.cfg.misfit_warn)
         if misfit > self.cfg.misfit_warn:

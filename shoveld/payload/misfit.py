@@ -14,7 +14,9 @@ import math
 MISFIT_WARN = 3.0
 """Above this, a pass's currents are not what the model of this machine says: the model
 lacks something the machine does, or a sensor measures something else. The pass is
-still weighed; the daemon logs a warning and the shift report names the pass. Measured
+still weighed (unless the crowd's laser lost the handle before it, and the pass fits far
+worse than the machine's usual: ``shoveld.engine.loop.CrowdDoubt``); the daemon logs a
+warning and the shift report names the pass. Measured
 (``bench/pass_misfit.py``): 1,080 passes of 18 realistic simulated machines at most
 1.04 (median 0.76), the committed capture's 0.64-0.84; a swing the model leaves out
 4.6-123; something lodged on the handle, in the laser's beam, 62-578."""

@@ -304,12 +304,13 @@ def swinging_table(machine_and_params: tuple[Machine, ModelParams]) -> SignalsTa
                            effects=swing_effects()).table
 
 
-def run_to_the_end(table: SignalsTable, cfg: Any, params: ModelParams
+def run_to_the_end(table: SignalsTable, cfg: Any, params: ModelParams,
+                   faults: list[Fault] | None = None
                    ) -> tuple[list[dict[str, Any]], dict[str, Any], dict[str, Any]]:
     """The whole table through the service on a simulated clock: its pass messages, then
     the health it publishes and the status it answers at the end."""
     got: list[dict[str, Any]] = []
-    svc, feed = table_service(table, cfg, params, close_truck_at_end=True)
+    svc, feed = table_service(table, cfg, params, close_truck_at_end=True, faults=faults)
     svc.on_event = lambda k, m: got.append({"topic": k, **m})
     svc.start()
     try:
@@ -391,6 +392,47 @@ def test_a_machine_the_model_does_not_fit_is_a_problem_health_names(
     for above, named in ((4, False), (5, True)):
         loop = {"misfit": {"warn": 3.0, "recent": 10, "recent_above": above}}
         assert bool(problems({}, loop, {"open": True}, {})) is named
+
+
+def test_passes_on_something_the_laser_took_for_the_handle_in_an_outage_are_not_weighed(
+        tmp_path: Path, machine_and_params: tuple[Machine, ModelParams]) -> None:
+    """The laser disconnected for a second in pass 3's lift, and from then on reading
+    something on the handle 1.5 m short of its target, moving with it (the machine's
+    currents are the real crowd's): pass 3 on, no pass is weighed, each says why, and
+    health names it for the cab and the office while it lasts; the passes before are
+    weighed as without the fault."""
+    machine, params = machine_and_params
+    res = cycles(machine, passes=5)
+    t0 = float(res.table.time[0])
+    a, b = res.passes[2].phases["lift"]
+    cut = 0.5 * (a + b)
+    cols = {k: v.copy() for k, v in res.table.columns.items()}
+    cols["crowd_m"][cols["time_s"] >= cut + 1.0] -= 1.5
+    lost = SignalsTable(cols, dict(res.table.meta), res.table.source)
+    cfg = make_cfg(tmp_path)
+    clean, _, _ = run_to_the_end(res.table, cfg, params)
+    cfg = make_cfg(tmp_path / "lost")
+    passes, health, status = run_to_the_end(
+        lost, cfg, params, [Fault("laser", cut - t0, cut - t0 + 1.0, "disconnected")])
+    assert [m["pass"] for m in passes] == [m["pass"] for m in clean] == [1, 2, 3, 4, 5]
+    assert [m["payload_kg"] for m in passes[:2]] == [m["payload_kg"] for m in clean[:2]]
+    assert all(m["valid"] for m in clean)
+    for m in passes[2:]:
+        assert not m["valid"] and m["payload_kg"] is None, m
+        assert m["reason"].startswith("the crowd laser had no reading for 1.0 s"), m
+    doubt = health["loop"]["crowd_doubt"]
+    assert doubt["refusing"] == doubt["passes_refused"] == 3
+    assert doubt["doubt"] == "had no reading for 1.0 s" and doubt["limit"] >= 3.0
+    said = [p for p in health["problems"] if "not weighed since" in p]
+    assert len(said) == 1 and said[0].startswith(
+        "payload: 3 passes not weighed since the crowd laser had no reading for 1.0 s: ")
+    assert said[0] in status["problems"]
+    # a doubt that has refused no pass is no problem: a gap alone is common (dust, a
+    # reconnect), and the next pass that fits ends it
+    from shoveld.daemon.health import problems
+
+    ok = {"crowd_doubt": {**doubt, "refusing": 0}}
+    assert problems({}, ok, {"open": True}, {}) == []
 
 
 def test_a_calibration_whose_verified_passes_fit_worse_is_a_problem_health_names(
