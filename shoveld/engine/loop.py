@@ -512,9 +512,9 @@ class Engine:
                         "above %.1f (%g times the machine's usual %.2f); %s so far",
                         self.pass_index, doubt.what, when, misfit, doubt.limit, DOUBT_FACTOR,
                         doubt.usual, n_of(self.doubt_refused, "such pass", "such passes"))
-        return (f"the crowd laser {doubt.what} {when} and the model does not fit the pass "
-                f"(misfit {misfit:.0f}, the machine's usual {doubt.usual:.2f}): the laser may "
-                "see something other than the handle")
+        return (f"the crowd laser may not be on the handle: it {doubt.what} {when}, and the "
+                f"pass does not fit the machine since (misfit {misfit:.0f}, its usual "
+                f"{doubt.usual:.2f}); something else may be in its beam")
 
     @property
     def empty_beyond(self) -> bool:

@@ -58,7 +58,7 @@ function render(snap) {
   w.className = s.warning ? s.warning.level : "";
   $("passes").innerHTML = s.passes.map((q, i) => {
     if (!(q.pass in screen.shown)) screen.shown[q.pass] = Date.now();
-    if (!q.valid) return `<tr class="invalid-pass"><td>${i + 1}</td><td colspan="2">not weighed: ${screen.esc(q.reason)}</td></tr>`;
+    if (!q.valid) return `<tr class="invalid-pass"><td>${i + 1}</td><td colspan="2" class="reason" title="${screen.esc(q.reason)}">not weighed: ${screen.esc(screen.reason(q.reason))}</td></tr>`;
     const doubt = q.misfit_high ? " ?" : "";
     return `<tr${doubt ? ' class="doubtful-pass"' : ""}><td>${i + 1}</td><td>${(q.payload_kg / 1000).toFixed(1)}${doubt}</td><td>${(q.std_kg / 1000).toFixed(1)}</td></tr>`;
   }).join("");

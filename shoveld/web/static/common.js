@@ -36,6 +36,12 @@ const screen = {
     const h = whole ? p : screen.head(p);
     return h === p ? p : h + " …";
   },
+  // Why a pass was not weighed, as a row of the cab's passes shows it: the head, before
+  // the first ": " (what happened; the why follows it), with " …" when something was cut.
+  reason(r) {
+    const i = (r || "").indexOf(": ");
+    return i < 0 ? (r || "") : r.slice(0, i) + " …";
+  },
   // Whether the page runs off the screen, or a panel of it scrolls (the cab's panels do
   // rather than push the page, on the 10-inch panels).
   overflows() {
