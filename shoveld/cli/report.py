@@ -28,13 +28,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from shoveld.cli.passes import read_window
-    from shoveld.daemon.persist import read_calibration_note, read_empties
+    from shoveld.daemon.persist import read_calibrations, read_empties
     from shoveld.report.figures import shift_figures
     from shoveld.report.write import write_report
 
     rows, path, since, until = read_window(args)
     figures = shift_figures(rows, since, until, empties=read_empties(path, since, until),
-                            calibration=read_calibration_note(path))
+                            calibrations=read_calibrations(path))
     try:
         page = write_report(figures, Path(args.out), args.title)
     except OSError as e:

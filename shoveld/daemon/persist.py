@@ -21,11 +21,14 @@ from shoveld.payload.misfit import MISFIT_RECENT
 
 log = logging.getLogger(__name__)
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 """2 (2026-11-29): the passes' ``misfit``; a version-1 log gains the column when the
 daemon opens it (its passes keep NULL there), in one transaction. 3 (2026-11-29, the
 thirty-first session): the table ``empties``, the empty dipper weighed on each return;
-an older log gains it (empty) when the daemon opens it."""
+an older log gains it (empty) when the daemon opens it. 4 (2026-11-30, the thirty-third
+session): the table ``calibrations``, each params' note from the pass they were first
+used on (``PassLog.note_calibration``), where the note of the last params only was kept
+in ``meta``; an older log gains it (empty) the same way."""
 DB_NAME = "passes.sqlite"
 
 _SCHEMA = """
@@ -65,6 +68,11 @@ CREATE TABLE IF NOT EXISTS empties (
     warn_kg REAL NOT NULL
 );
 CREATE INDEX IF NOT EXISTS empties_end ON empties(end_unix);
+CREATE TABLE IF NOT EXISTS calibrations (
+    from_pass INTEGER PRIMARY KEY,
+    params TEXT NOT NULL,
+    note TEXT NOT NULL
+);
 """
 
 
@@ -149,7 +157,7 @@ def connect(path: str | Path, readonly: bool = False, durable: bool = True
         con.executescript("BEGIN IMMEDIATE; ALTER TABLE passes ADD COLUMN misfit REAL; "
                           f"UPDATE meta SET value = '{SCHEMA_VERSION}' WHERE key = 'schema'; "
                           "COMMIT;")
-    # a version-2 log has its new table from the schema above: say so in its version
+    # a version-2 or 3 log has its new tables from the schema above: say so in its version
     con.execute("UPDATE meta SET value = ? WHERE key = 'schema' AND CAST(value AS INTEGER) < ?",
                 (str(SCHEMA_VERSION), SCHEMA_VERSION))
     return con
@@ -239,10 +247,18 @@ class PassLog:
 
     def note_calibration(self, note: str) -> None:
         """What the daemon's params say of their own calibration ("" for nothing: the
-        ratio of ``calibrate --verified`` below its level, or none), kept beside their
-        fingerprint so that the shift report says it of the passes weighed with them."""
-        self.con.execute("INSERT OR REPLACE INTO meta(key, value) VALUES "
-                         "('calibration_note', ?)", (note,))
+        ratio of ``calibrate --verified`` below its level, or none), kept with their
+        fingerprint and the pass they were first used on (``restore`` recorded both), so
+        that the shift report says it of the passes weighed with them, whatever params
+        came after."""
+        c = self.con
+        meta = dict(c.execute("SELECT key, value FROM meta WHERE key IN "
+                              "('params', 'params_from_pass')").fetchall())
+        first = str(meta.get("params_from_pass", ""))
+        if "params" not in meta or not first.isdigit():
+            return  # no params recorded by restore: no pass to say it of
+        c.execute("INSERT OR REPLACE INTO calibrations(from_pass, params, note) "
+                  "VALUES (?, ?, ?)", (int(first), meta["params"], note))
 
     def write_pass(self, p: dict[str, Any], start_unix: float, end_unix: float,
                    target_kg: float, boot_stamp: str | None = None) -> bool:
@@ -387,20 +403,27 @@ def read_empties(path: str | Path, since_unix: float | None = None,
     return out
 
 
-def read_calibration_note(path: str | Path) -> tuple[str, int] | None:
-    """The note of the params the daemon last ran with (``PassLog.note_calibration``) and
-    the first pass weighed with them; None when there is no note (nothing to say, or a
-    log written before the thirty-second session)."""
+def read_calibrations(path: str | Path) -> list[tuple[str, int, int | None]]:
+    """What each params the daemon ran with said of their own calibration
+    (``PassLog.note_calibration``), with the first and the last pass weighed with them
+    (None: to the end), oldest first; only those that said something. Empty for a log
+    written before the thirty-third session's schema 4."""
     con = connect(path, readonly=True)
     try:
-        meta = dict(con.execute("SELECT key, value FROM meta WHERE key IN "
-                                "('calibration_note', 'params_from_pass')").fetchall())
+        try:
+            rows = con.execute("SELECT from_pass, note FROM calibrations "
+                               "ORDER BY from_pass").fetchall()
+        except sqlite3.OperationalError:  # no such table: an older log, not reopened since
+            return []
     finally:
         con.close()
-    note, first = meta.get("calibration_note"), meta.get("params_from_pass")
-    if not note or first is None or not str(first).isdigit():
-        return None  # nothing to say, or not the daemon's own record: nothing to trust
-    return note, int(first)
+    out: list[tuple[str, int, int | None]] = []
+    for k, (first, note) in enumerate(rows):
+        if not note:
+            continue  # nothing to say
+        last = rows[k + 1][0] - 1 if k + 1 < len(rows) else None
+        out.append((str(note), first, last))
+    return out
 
 
 @dataclass

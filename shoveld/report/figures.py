@@ -49,17 +49,15 @@ class ShiftFigures:
     empties: list[dict[str, Any]] | None = None
     """The empty dipper weighed on the returns (``persist.read_empties``); None: the pass
     log records none (written before 2026-11-29's schema 3)."""
-    calibration: tuple[str, int] | None = None
-    """What the daemon's params said of their own calibration, and the first pass
-    weighed with them (``persist.read_calibration_note``); None: nothing to say."""
+    calibrations: list[tuple[str, int, int | None]] = field(default_factory=list)
+    """What each params the daemon ran with said of their own calibration, with the first
+    and last pass weighed with them (``persist.read_calibrations``); only those that said
+    something."""
 
-    @property
-    def calibration_passes(self) -> list[int]:
-        """This period's passes weighed with the params of ``calibration``."""
-        if self.calibration is None:
-            return []
-        first = self.calibration[1]
-        return [int(p["pass"]) for p in self.passes if int(p["pass"]) >= first]
+    def calibration_passes(self, first: int, last: int | None) -> list[int]:
+        """This period's passes from ``first`` to ``last`` (None: to the end)."""
+        return [int(p["pass"]) for p in self.passes
+                if int(p["pass"]) >= first and (last is None or int(p["pass"]) <= last)]
 
     @property
     def empty_beyond(self) -> list[dict[str, Any]]:
@@ -80,13 +78,14 @@ class ShiftFigures:
 def shift_figures(rows: list[dict[str, Any]], since: float | None = None,
                   until: float | None = None,
                   empties: list[dict[str, Any]] | None = None,
-                  calibration: tuple[str, int] | None = None) -> ShiftFigures:
+                  calibrations: list[tuple[str, int, int | None]] | None = None
+                  ) -> ShiftFigures:
     """Trucks against their targets, the 10/10/20 rule over the closed ones, tonnes per
     hour, cycle times and invalid passes; the misfits, and the empty-dipper checks."""
     ends = [float(r["end"]) for r in rows]
     since = min(ends) if since is None and ends else (since or 0.0)
     until = max(ends) if until is None and ends else (until or 0.0)
-    f = ShiftFigures(since, until, rows, empties=empties, calibration=calibration)
+    f = ShiftFigures(since, until, rows, empties=empties, calibrations=list(calibrations or []))
     by_truck: dict[int, Truck] = {}
     closed: dict[int, bool] = {}
     for r in rows:

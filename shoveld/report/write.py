@@ -211,16 +211,18 @@ def write_report(f: ShiftFigures, out: Path, title: str = "Shift report") -> Pat
 
 
 def _calibration_section(f: ShiftFigures) -> list[str]:
-    """The daemon's calibration, when it said the model lacks something (health said it
-    on the cab and the office all along): of which of this period's passes."""
-    got = f.calibration_passes
-    if f.calibration is None or not got:
-        return []
-    note = f.calibration[0]
-    return ["<h2>The calibration</h2>",
-            f"<p id='calibration' class='bad'>{n_of(len(got), 'pass', 'passes')} of this "
-            f"period (pass {got[0]} on) were weighed with params whose calibration said: "
-            f"{html.escape(note)}.</p>"]
+    """The daemon's calibrations, when one said the model lacks something (health said it
+    on the cab and the office all along): of which of this period's passes, for each
+    params weighed with in it."""
+    said = []
+    for note, first, last in f.calibrations:
+        got = f.calibration_passes(first, last)
+        if got:
+            upto = "" if last is None or got[-1] < last else f" to {last}"
+            said.append(f"<p class='calibration bad'>{n_of(len(got), 'pass', 'passes')} of "
+                        f"this period (pass {got[0]}{' on' if not upto else upto}) were "
+                        f"weighed with params whose calibration said: {html.escape(note)}.</p>")
+    return ["<h2 id='calibration'>The calibration</h2>", *said] if said else []
 
 
 def _misfit_section(f: ShiftFigures) -> list[str]:

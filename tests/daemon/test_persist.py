@@ -350,18 +350,50 @@ def test_restore_carries_on_the_checks_of_the_same_params_only(tmp_path: Path) -
 
 def test_a_meta_record_that_is_not_the_daemons_is_not_trusted(tmp_path: Path) -> None:
     """A pass log whose record of the params' first pass was edited into something else:
-    the restore starts those params afresh (and writes the record again), and the report
-    has no calibration to say, rather than a traceback."""
-    from shoveld.daemon.persist import read_calibration_note
+    a note then says nothing of any pass (the report keeps what was said before), and the
+    restore starts those params afresh and writes the record again."""
+    from shoveld.daemon.persist import read_calibrations
 
     path = db_path(tmp_path)
     log = PassLog(path, "s1")
     log.restore("calib-a")
     log.note_calibration("the model lacks something")
-    assert read_calibration_note(path) == ("the model lacks something", 1)
+    assert read_calibrations(path) == [("the model lacks something", 1, None)]
     log.con.execute("UPDATE meta SET value = 'x' WHERE key = 'params_from_pass'")
-    assert read_calibration_note(path) is None
+    log.note_calibration("something else")
+    assert read_calibrations(path) == [("the model lacks something", 1, None)]
     r = log.restore("calib-a")
     assert (r.recent_misfits, r.empty_checks) == ([], [])
-    assert read_calibration_note(path) == ("the model lacks something", 1)
+    log.note_calibration("the model lacks something")
+    assert read_calibrations(path) == [("the model lacks something", 1, None)]
+    log.close()
+
+
+def test_each_params_note_is_kept_from_its_first_pass(tmp_path: Path) -> None:
+    """Params that said the model lacks something, then others that said nothing, then
+    the first again: each note with the passes weighed with its params, the earlier ones
+    kept when other params come (until the thirty-third session only the last params'
+    note was kept); a log from before the table has none, and no traceback."""
+    from shoveld.daemon.persist import read_calibrations
+
+    path = db_path(tmp_path)
+    log = PassLog(path, "s1")
+
+    def passes(first: int, n: int) -> None:
+        for k in range(first, first + n):
+            log.write_pass({"pass": k, "truck": 1, "payload_kg": 30000.0, "std_kg": 300.0,
+                            "start_s": 60.0 * k, "end_s": 60.0 * k + 20, "samples": 500,
+                            "valid": True, "reason": ""}, 1e9 + 60 * k, 1e9 + 60 * k + 20,
+                           136000.0)
+
+    for params, note, n in (("calib-a", "lacks a swing", 3), ("calib-b", "", 2),
+                            ("calib-a", "lacks a swing", 1)):
+        log.restore(params)
+        log.note_calibration(note)
+        passes(log.restore(params).next_pass, n)
+    log.restore("calib-a")  # a restart with the same params: the same record
+    log.note_calibration("lacks a swing")
+    assert read_calibrations(path) == [("lacks a swing", 1, 3), ("lacks a swing", 6, None)]
+    log.con.execute("DROP TABLE calibrations")
+    assert read_calibrations(path) == []
     log.close()

@@ -488,7 +488,7 @@ def test_a_calibration_whose_verified_passes_fit_worse_is_a_problem_health_names
         return (out / "index.html").read_text()
 
     page = report(tmp_path / "state")
-    assert ("<p id='calibration' class='bad'>6 passes of this period (pass 1 on) were weighed "
+    assert ("<p class='calibration bad'>6 passes of this period (pass 1 on) were weighed "
             "with params whose calibration said: " + said[0].removeprefix("payload: ")
             .replace("'", "&#x27;")) in page, page
     # the trials-only calibration of the same machine records no ratio, and health has

@@ -226,14 +226,28 @@ def test_the_calibration_is_said_of_the_passes_weighed_with_it(tmp_path: Path) -
         return (out / "index.html").read_text()
 
     assert len(made) == 25
-    assert ("<p id='calibration' class='bad'>2 passes of this period (pass 26 on) were "
-            "weighed with params whose calibration said: the calibration&#x27;s passes fit "
-            "worse than its trials (hoist 2.6 times): above 1.5, the model lacks "
-            "something.</p>") in page()
+    said = ("<p class='calibration bad'>2 passes of this period (pass 26 on) were weighed "
+            "with params whose calibration said: the calibration&#x27;s passes fit worse "
+            "than its trials (hoist 2.6 times): above 1.5, the model lacks something.</p>")
+    assert said in page()
     before = page("--until", str(made[-1]["end"] + 1.0))
     assert "id='calibration'" not in before and "25 passes" in before
-    # nothing to say: no section
+    # new params that say nothing, and a pass weighed with them: the earlier params' note
+    # stays with the passes weighed with them, and says where they ended
     log = PassLog(db, "s1")
+    log.restore("calib-b")
     log.note_calibration("")
+    log.write_pass({"pass": 28, "truck": 6, "payload_kg": 30000.0, "std_kg": 300.0,
+                    "start_s": t - T0, "end_s": t - T0 + 20, "samples": 500,
+                    "valid": True, "reason": ""}, t, t + 20.0, TARGET)
+    log.close()
+    text = page()
+    assert said.replace("(pass 26 on)", "(pass 26 to 27)") in text
+    assert text.count("class='calibration bad'") == 1
+    # nothing to say of any params: no section
+    log = PassLog(db, "s1")
+    log.restore("calib-a")
+    log.note_calibration("")
+    log.con.execute("UPDATE calibrations SET note = ''")
     log.close()
     assert "id='calibration'" not in page()
