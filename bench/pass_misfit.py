@@ -50,17 +50,19 @@ from shoveld.payload.misfit import MISFIT_WARN
 def doubt_refusals(misfits: list[float]) -> int:
     """The passes the engine would not weigh if the crowd were in doubt before every one
     of them (the worst case of ``CrowdDoubt``: a laser gap before each pass): each judged
-    against ``DOUBT_FACTOR`` times the median of the last passes weighed before it."""
+    against ``doubt_factor`` times the median of the last passes weighed before it."""
     from collections import deque
 
-    from shoveld.engine.loop import DOUBT_FACTOR
+    from shoveld.engine.loop import EngineConfig
+
+    factor = EngineConfig().doubt_factor
 
     fits: deque[float] = deque(maxlen=10)
     refused = 0
     for m in misfits:
         if not math.isfinite(m):
             continue
-        if fits and m > max(MISFIT_WARN, DOUBT_FACTOR * statistics.median(fits)):
+        if fits and m > max(MISFIT_WARN, factor * statistics.median(fits)):
             refused += 1
         else:
             fits.append(m)

@@ -86,22 +86,9 @@ it: about 6 s of lift and swing at 100 Hz, so a long pass holds a bounded memory
 NEEDED = ("handle_deg", "crowd_m", "hoist1_a", "hoist2_a", "hoist_field_a", "crowd_a")
 """Signals without which a payload update is not made."""
 
-CROWD_GAP_S = 0.2
-"""The crowd's reading missing this long (the laser silent, reconnected, or seeing no
-target) leaves what it reads next unconfirmed (:class:`CrowdDoubt`): the handle moves up
-to 3 m/s, so after a gap the driver cannot tell something on the handle within that reach
-from the handle itself (docs/drivers-ar4000.md, "A reconnect keeps the handle's reach")."""
-DOUBT_FACTOR = 10.0
-"""While the crowd is unconfirmed, a pass whose misfit is above this many times the
-machine's usual (the median of the last passes' before the doubt, and at least
-``misfit_warn``) is not weighed: something on the handle put the committed capture's
-passes at 26-578 where they had 0.84, a swing the model lacks spreads one machine's
-passes over 4.6-59 around a median of 18 (docs/engine.md, "A pass's misfit")."""
-
-
 @dataclass(frozen=True)
 class CrowdDoubt:
-    """The crowd's laser lost the handle (a gap of ``CROWD_GAP_S``, a change of target):
+    """The crowd's laser lost the handle (a gap of ``crowd_gap_s``, a change of target):
     until a pass fits the machine as its passes did before, the laser may be reading
     something else on the handle, which only the pass's misfit can show."""
 
@@ -169,6 +156,19 @@ class EngineConfig:
     dipper on its returns"). 0: no check."""
     empty_returns: int = 5
     """Returns the empty check takes the median of."""
+    crowd_gap_s: float = 0.2
+    """The crowd's reading missing this long (the laser silent, reconnected, or seeing no
+    target) leaves what it reads next in doubt (:class:`CrowdDoubt`): the handle moves up
+    to 3 m/s, so after a gap the driver cannot tell something on the handle within that
+    reach from the handle itself (docs/drivers-ar4000.md, "A reconnect keeps the handle's
+    reach")."""
+    doubt_factor: float = 10.0
+    """While the crowd is in doubt, a pass whose misfit is above this many times the
+    machine's usual (the median of the last passes' before the doubt, and at least
+    ``misfit_warn``) is not weighed: something on the handle put the committed capture's
+    passes at 26-578 where they had 0.84, a swing the model lacks spreads one machine's
+    passes over 4.6-59 around a median of 18 (docs/engine.md, "A crowd in doubt"). 0: no
+    doubt, every pass weighed."""
     hoist_field_nominal_a: float = 70.0
     weak_field_fraction: float = 0.97
     phases: PhaseConfig = field(default_factory=PhaseConfig)
@@ -365,6 +365,7 @@ class Engine:
         self._settle_s = self.cfg.settle_s
         self._early_use = 1 if self.cfg.settle_test_z > 0 else 0
         self._kalman_rates = self.cfg.payload_rates == "kalman"
+        self._crowd_gap_s = self.cfg.crowd_gap_s
 
     # -- public -----------------------------------------------------------------------
     def step(self, s: Sample) -> list[Event]:
@@ -389,7 +390,7 @@ class Engine:
         th, thd, thdd, d, dd, ddd, sw, swd, swdd = update_joints(
             self.f_th, self.f_d, self.f_sw, t, z_th, z_d, z_sw)
         if z_d == z_d:  # a crowd reading, after a gap?
-            if t - self._crowd_t > CROWD_GAP_S:  # False for the first (NaN)
+            if t - self._crowd_t > self._crowd_gap_s:  # False for the first (NaN)
                 gap = t - self._crowd_t
                 self._doubt_crowd(f"had no reading for {gap:.1f} s" if gap < math.inf
                                   else "went unread while the daemon was stopped", t, gap)
@@ -494,11 +495,11 @@ class Engine:
             if weight >= old.weight:
                 self.crowd_doubt = replace(old, what=what, t=t, weight=weight)
             return
-        if not self.fits:
+        if not self.fits or self.cfg.doubt_factor <= 0:
             return
         usual = float(np.median(self.fits))
-        self.crowd_doubt = CrowdDoubt(what, t, max(self.cfg.misfit_warn, DOUBT_FACTOR * usual),
-                                      usual, weight)
+        limit = max(self.cfg.misfit_warn, self.cfg.doubt_factor * usual)
+        self.crowd_doubt = CrowdDoubt(what, t, limit, usual, weight)
 
     def _doubt_reason(self, doubt: CrowdDoubt, misfit: float) -> str:
         """Why a pass is not weighed for a crowd in doubt (logged now and then)."""
@@ -510,7 +511,8 @@ class Engine:
         if _now_and_then(self.doubt_refused):
             log.warning("pass %d not weighed: the crowd laser %s %s, and its misfit %.1f is "
                         "above %.1f (%g times the machine's usual %.2f); %s so far",
-                        self.pass_index, doubt.what, when, misfit, doubt.limit, DOUBT_FACTOR,
+                        self.pass_index, doubt.what, when, misfit, doubt.limit,
+                        self.cfg.doubt_factor,
                         doubt.usual, n_of(self.doubt_refused, "such pass", "such passes"))
         return (f"the crowd laser may not be on the handle: it {doubt.what} {when}, and the "
                 f"pass does not fit the machine since (misfit {misfit:.0f}, its usual "

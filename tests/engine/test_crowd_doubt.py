@@ -17,7 +17,7 @@ from functools import cache
 import numpy as np
 import pytest
 
-from shoveld.engine.loop import DOUBT_FACTOR, Engine, EngineConfig, PassResult, run_engine
+from shoveld.engine.loop import Engine, EngineConfig, PassResult, run_engine
 from shoveld.identify.calibrate import Calibrator
 from shoveld.model.params import ModelParams
 from shoveld.sample import samples_from_table
@@ -28,6 +28,7 @@ from shoveld.sim.scenario import PassTruth, simulate_calibration, simulate_cycle
 
 PASSES = 7
 GAP_PASS = 4
+DOUBT_FACTOR = EngineConfig().doubt_factor
 
 
 @dataclass(frozen=True)
@@ -173,3 +174,14 @@ def test_a_change_of_target_between_passes_puts_the_crowd_in_doubt() -> None:
     assert doubt.limit == max(3.0, DOUBT_FACTOR * doubt.usual) and 0.0 < doubt.usual < 3.0
     assert len(out) == PASSES and all(p.valid for p in out)
     assert eng.crowd_doubt is None and eng.doubt_refused == 0
+
+
+def test_a_doubt_factor_of_zero_weighs_every_pass_as_before() -> None:
+    """``[engine] doubt_factor = 0`` (a site that wants the misfit's marks alone): the
+    passes on the thing are weighed, as until the thirty-third session."""
+    s = session(2000)
+    lost = laser_lost(s, 1.0, 1.5)
+    eng = Engine(s.params, EngineConfig(rate_hz=lost.sample_rate_hz, doubt_factor=0.0))
+    got = [e for e in run_engine(samples_from_table(lost), eng) if isinstance(e, PassResult)]
+    assert len(got) == PASSES and all(p.valid for p in got)
+    assert eng.crowd_doubt is None and max(p.misfit for p in got) > 3.0
