@@ -86,6 +86,7 @@ it: about 6 s of lift and swing at 100 Hz, so a long pass holds a bounded memory
 NEEDED = ("handle_deg", "crowd_m", "hoist1_a", "hoist2_a", "hoist_field_a", "crowd_a")
 """Signals without which a payload update is not made."""
 
+
 @dataclass(frozen=True)
 class CrowdDoubt:
     """The crowd's laser lost the handle (a gap of ``crowd_gap_s``, a change of target):

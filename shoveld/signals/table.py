@@ -256,9 +256,10 @@ def _fast_chunk(chunk: list[str], prev: tuple[float, int] | None
         return None, prev
     # A blank cell is unknown: NaN. Most tables leave blanks only in the last column
     # (payload_kg, known on few rows): loadtxt reads that column through a converter that
-    # takes a blank for NaN, from the list of lines as read - a fifth less time than
-    # filling the blanks line by line first, a third less than parsing the same text from
-    # a StringIO. A blank elsewhere leaves an empty cell, which loadtxt refuses: then fill
+    # takes a blank for NaN, from the list of lines as read (the whole read 9 % faster than
+    # filling the blanks line by line first: 1.67 against 1.81 s for 3 hours; and loadtxt
+    # parses a list of lines faster than a StringIO of the same text, 0.49 against 0.56 s
+    # an hour). A blank elsewhere leaves an empty cell, which loadtxt refuses: then fill
     # them all and try again.
     arr = _loadtxt(chunk, converters={ncol - 1: _blank_is_nan})
     if arr is None:
