@@ -58,7 +58,11 @@ function render(snap) {
   w.className = s.warning ? s.warning.level : "";
   $("passes").innerHTML = s.passes.map((q, i) => {
     if (!(q.pass in screen.shown)) screen.shown[q.pass] = Date.now();
-    if (!q.valid) return `<tr class="invalid-pass"><td>${i + 1}</td><td colspan="2" class="reason" title="${screen.esc(q.reason)}">not weighed: ${screen.esc(screen.reason(q.reason))}</td></tr>`;
+    if (!q.valid) {
+      // the reason's head on one line; a tap (the panel is touch) shows the whole for a while
+      const whole = screen.tapped("pass" + q.pass);
+      return `<tr class="invalid-pass" data-pass="${q.pass}"><td>${i + 1}</td><td colspan="2" class="reason${whole ? " whole" : ""}" title="${screen.esc(q.reason)}">not weighed: ${screen.esc(whole ? q.reason : screen.reason(q.reason))}</td></tr>`;
+    }
     const doubt = q.misfit_high ? " ?" : "";
     return `<tr${doubt ? ' class="doubtful-pass"' : ""}><td>${i + 1}</td><td>${(q.payload_kg / 1000).toFixed(1)}${doubt}</td><td>${(q.std_kg / 1000).toFixed(1)}</td></tr>`;
   }).join("");
@@ -81,5 +85,9 @@ function showProblems(probs, whole) {
 
 screen.theme();
 screen.tappable($("health"), () => "", () => render(screen.snapshot));
+screen.tappable($("passes"), ev => {
+  const row = ev.target.closest("tr.invalid-pass");
+  return row ? "pass" + row.dataset.pass : null;
+}, () => render(screen.snapshot));
 screen.connect(render);
 setInterval(() => render(screen.snapshot), 1000);
