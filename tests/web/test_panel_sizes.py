@@ -204,19 +204,18 @@ def test_a_ten_inch_panel_shows_the_whole_cab_page_without_scrolling(
         assert row[0] == "3not weighed: the crowd laser may not be on the handle …", row
         assert row[1] == NOT_WEIGHED and row[2] <= row[3] + 1, row
         # the panel is touch, where a title never shows: a tap shows the whole reason,
-        # wrapped inside the panel, and a second tap the head again
-        cell = b.find_element("css selector", "#passes tr.invalid-pass td.reason")
-        cell.click()
-        assert wait_for(lambda: b.find_element(
-            "css selector", "#passes tr.invalid-pass td.reason").text
-            == "not weighed: " + NOT_WEIGHED, 3.0)
-        wide = b.execute_script(
-            "const c = document.querySelector('#passes tr.invalid-pass td.reason');"
-            "return [c.getBoundingClientRect().right, document.documentElement.scrollWidth]")
+        # wrapped inside the panel, and a second tap the head again (the rows are drawn
+        # again at every snapshot, so each is found and tapped in one script)
+        cell = "document.querySelector('#passes tr.invalid-pass td.reason')"
+        b.execute_script(f"{cell}.click()")
+        assert wait_for(lambda: b.execute_script(f"return {cell}.textContent")
+                        == "not weighed: " + NOT_WEIGHED, 3.0)
+        wide = b.execute_script(f"return [{cell}.getBoundingClientRect().right,"
+                                " document.documentElement.scrollWidth]")
         assert wide[0] <= inner_w and wide[1] <= inner_w, (width, wide)
-        b.find_element("css selector", "#passes tr.invalid-pass td.reason").click()
-        assert wait_for(lambda: b.find_element(
-            "css selector", "#passes tr.invalid-pass td.reason").text.endswith(" …"), 3.0)
+        b.execute_script(f"{cell}.click()")
+        assert wait_for(lambda: b.execute_script(f"return {cell}.textContent").endswith(" …"),
+                        3.0)
         assert b.find_element("id", "doubt").text == (
             "? pass 4: the model did not fit it (misfit 6.2); its weight may be off")
         # the three problems whole where the panel has room (1280 x 800), each one's head
