@@ -87,7 +87,8 @@ class Restored:
     last_dump_boot: str | None = None
     """The last dump on the live clock, "<boot id> <monotonic s>" (see ``write_pass``)."""
     recent_misfits: list[float] = field(default_factory=list)
-    """The misfits of the last passes weighed with these params (at most
+    """The misfits of the last passes weighed with these params (not those not weighed;
+    at most
     ``RESTORED_MISFITS``, oldest first): health's count of passes the model did not fit
     goes on across a restart."""
     empty_checks: list[float] = field(default_factory=list)
@@ -239,7 +240,7 @@ class PassLog:
             return
         first = int(since[0])
         r.recent_misfits = [m for (m,) in reversed(c.execute(
-            "SELECT misfit FROM passes WHERE pass >= ? AND misfit IS NOT NULL "
+            "SELECT misfit FROM passes WHERE pass >= ? AND misfit IS NOT NULL AND valid = 1 "
             "ORDER BY pass DESC LIMIT ?", (first, RESTORED_MISFITS)).fetchall())]
         r.empty_checks = [kg for (kg,) in reversed(c.execute(
             "SELECT payload_kg FROM empties WHERE after_pass >= ? "

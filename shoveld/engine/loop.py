@@ -310,7 +310,7 @@ class Engine:
         self.last_misfit = math.nan
         """The last finished pass's misfit (NaN: none yet, or no sample in it)."""
         self.recent_misfits: deque[bool] = deque(maxlen=MISFIT_RECENT)
-        """Whether each of the last passes with a sample was above ``misfit_warn``."""
+        """Whether each of the last passes weighed was above ``misfit_warn``."""
         self.fits: deque[float] = deque(maxlen=MISFIT_RECENT)
         """The misfits of the last passes weighed while the crowd was not in doubt: the
         machine's usual, which a :class:`CrowdDoubt` is judged against."""
@@ -653,7 +653,9 @@ class Engine:
                 self.crowd_doubt = None
                 self.doubt_refusing = 0
                 self.fits.append(misfit)
-        if math.isfinite(misfit):
+        if valid and math.isfinite(misfit):
+            # the weighed passes only: one not weighed says its own cause (a laser that
+            # changed target, a crowd in doubt), which "did not fit" would hide
             self.recent_misfits.append(misfit > self.cfg.misfit_warn)
         if misfit > self.cfg.misfit_warn:
             self.misfit_high += 1

@@ -348,6 +348,23 @@ def test_restore_carries_on_the_checks_of_the_same_params_only(tmp_path: Path) -
     assert not audit_log(path).problems
 
 
+def test_restore_carries_on_the_misfits_of_the_passes_weighed_only(tmp_path: Path) -> None:
+    """A pass not weighed (a laser that changed target, a crowd in doubt) says its own
+    cause: its misfit is not given back to health's count of passes the model did not
+    fit, as the engine does not count it either."""
+    path = db_path(tmp_path)
+    log = PassLog(path, "s1")
+    log.restore("calib-a")
+    for n in (1, 2):
+        assert log.write_pass({**p(n, 1), "misfit": 0.8}, T0 + 30 * n, T0 + 30 * n + 8,
+                              62000.0)
+    assert log.write_pass({**p(3, 1, valid=False), "misfit": 99.0}, T0 + 90, T0 + 98,
+                          62000.0)
+    log.close()
+    r = PassLog(path, "s1").restore("calib-a")
+    assert r.recent_misfits == [0.8, 0.8] and r.next_pass == 4
+
+
 def test_a_meta_record_that_is_not_the_daemons_is_not_trusted(tmp_path: Path) -> None:
     """A pass log whose record of the params' first pass was edited into something else:
     a note then says nothing of any pass (the report keeps what was said before), and the

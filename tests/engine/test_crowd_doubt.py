@@ -106,6 +106,8 @@ def test_something_on_the_handle_after_a_gap_is_not_weighed(seed: int) -> None:
     assert not got_i[GAP_PASS].valid and " in this pass, " in got_i[GAP_PASS].reason
     assert " s before this pass, " in got_i[PASSES].reason
     assert eng.doubt_refused == PASSES - GAP_PASS + 1 and eng.crowd_doubt is not None
+    # health's "did not fit" counts the passes weighed: those not weighed say their cause
+    assert list(eng.recent_misfits) == [False] * (GAP_PASS - 1)
 
 
 @pytest.mark.parametrize("seed", [1000, 2000])
