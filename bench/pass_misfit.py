@@ -9,8 +9,9 @@ passes:
 * ``--handle``: something lodged on the handle in the laser's beam, moving with it, from
   0.5-3 s after pass 1's dump to the end of the committed capture, 0.5-3 m off the
   target (the driver takes it after ``other_target_s``, inside pass 2, which is then not
-  weighed; pass 3 is weighed on the offset crowd); per seed: the offset, each pass's
-  payload against the clean capture's, and its misfit;
+  weighed; pass 3, on the offset crowd, was weighed until the thirty-third session and
+  is now refused, the change of target having put the crowd in doubt); per seed: the
+  offset, each pass's payload against the clean capture's, and its misfit;
 * ``--machines N``: the realistic and the ideal simulated machines of
   ``bench/payload_accuracy.py`` (seeds 1..N, 60 passes each): the misfit's spread;
 * ``--effects``: each simulated hidden effect alone at the bottom and the top of its
