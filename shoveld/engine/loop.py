@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import math
+import statistics
 from collections import deque
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field, replace
@@ -483,7 +484,7 @@ class Engine:
             # in doubt, as after a gap (a start without this machine's usual cannot be)
             self._crowd_t = -math.inf
         checks = self.empty_checks = list(empties)[-max(1, self.cfg.empty_returns):]
-        self.empty_median = float(np.median(checks)) if checks else math.nan
+        self.empty_median = statistics.median(checks) if checks else math.nan
 
     def _doubt_crowd(self, what: str, t: float, weight: float) -> None:
         """The crowd's laser lost the handle at ``t``: judge the passes from here against
@@ -498,7 +499,7 @@ class Engine:
             return
         if not self.fits or self.cfg.doubt_factor <= 0:
             return
-        usual = float(np.median(self.fits))
+        usual = statistics.median(self.fits)
         limit = max(self.cfg.misfit_warn, self.cfg.doubt_factor * usual)
         self.crowd_doubt = CrowdDoubt(what, t, limit, usual, weight)
 
@@ -580,7 +581,9 @@ class Engine:
         checks = self.empty_checks
         checks.append(kg)
         del checks[:-max(1, self.cfg.empty_returns)]
-        med = self.empty_median = float(np.median(checks))
+        # the standard library's median of a few floats: the same number as numpy's,
+        # without importing numpy.ma, which np.median does at its first call
+        med = self.empty_median = statistics.median(checks)
         if self.empty_beyond:
             self.empty_warned += 1
             k = self.empty_warned
