@@ -61,7 +61,7 @@ function render(snap) {
     if (!q.valid) {
       // the reason's head on one line; a tap (the panel is touch) shows the whole for a while
       const whole = screen.tapped("pass" + q.pass);
-      return `<tr class="invalid-pass" data-pass="${q.pass}"><td>${i + 1}</td><td colspan="2" class="reason${whole ? " whole" : ""}" title="${screen.esc(q.reason)}">not weighed: ${screen.esc(whole ? q.reason : screen.reason(q.reason))}</td></tr>`;
+      return `<tr class="invalid-pass" data-pass="${q.pass}"><td>${i + 1}</td><td colspan="2" class="reason${whole ? " whole" : ""}" title="${screen.esc(q.reason)}">not weighed: ${screen.esc(screen.clipped(q.reason || "", whole, 1))}</td></tr>`;
     }
     const doubt = q.misfit_high ? " ?" : "";
     return `<tr${doubt ? ' class="doubtful-pass"' : ""}><td>${i + 1}</td><td>${(q.payload_kg / 1000).toFixed(1)}${doubt}</td><td>${(q.std_kg / 1000).toFixed(1)}</td></tr>`;
@@ -78,7 +78,7 @@ function render(snap) {
 
 function showProblems(probs, whole) {
   const h = $("health");
-  h.textContent = probs.length ? probs.map(p => screen.shown(p, whole)).join(" · ") : "all sensors ok";
+  h.textContent = probs.length ? probs.map(p => screen.clipped(p, whole)).join(" · ") : "all sensors ok";
   h.title = whole ? "" : probs.join("\n");
   h.className = probs.length ? "bad" : "ok";
 }

@@ -24,23 +24,23 @@ const screen = {
     };
     open();
   },
-  // A health problem's head: "source: what", before the why and what to do, which follow
-  // the second ": ".
-  head(p) {
-    const i = p.indexOf(": ");
-    const j = i < 0 ? -1 : p.indexOf(": ", i + 2);
-    return j < 0 ? p : p.slice(0, j);
+  // A text's head, before its nth ": ": a health problem's "source: what" (nth 2), before
+  // the why and what to do; a pass's reason for not being weighed (nth 1), what happened
+  // before why. The whole text when it has no such colon.
+  head(p, nth = 2) {
+    let j = -2;
+    for (let k = 0; k < nth; k++) {
+      j = p.indexOf(": ", j + 2);
+      if (j < 0) return p;
+    }
+    return p.slice(0, j);
   },
-  // A problem as shown: whole, or its head with " …" when something was cut.
-  shown(p, whole) {
-    const h = whole ? p : screen.head(p);
+  // A text as shown: whole, or its head with " …" when something was cut. (Not named
+  // "shown": that is the map of passes to the time they appeared, which the latency
+  // bench reads; a method of that name replaced it.)
+  clipped(p, whole, nth = 2) {
+    const h = whole ? p : screen.head(p, nth);
     return h === p ? p : h + " …";
-  },
-  // Why a pass was not weighed, as a row of the cab's passes shows it: the head, before
-  // the first ": " (what happened; the why follows it), with " …" when something was cut.
-  reason(r) {
-    const i = (r || "").indexOf(": ");
-    return i < 0 ? (r || "") : r.slice(0, i) + " …";
   },
   // Whether the page runs off the screen, or a panel of it scrolls (the cab's panels do
   // rather than push the page, on the 10-inch panels).
