@@ -18,13 +18,12 @@ import numpy as np
 import pytest
 
 from shoveld.engine.loop import Engine, EngineConfig, PassResult, run_engine
-from shoveld.identify.calibrate import Calibrator
 from shoveld.model.params import ModelParams
 from shoveld.sample import samples_from_table
 from shoveld.signals.table import SignalsTable
-from shoveld.sim.effects import SIM_EFFECTS, make_effects
-from shoveld.sim.machine import Machine
-from shoveld.sim.scenario import PassTruth, simulate_calibration, simulate_cycles
+from shoveld.sim.effects import SIM_EFFECTS
+from shoveld.sim.scenario import PassTruth
+from tests.engine.test_misfit import calibrated_session
 
 PASSES = 7
 GAP_PASS = 4
@@ -40,19 +39,10 @@ class Session:
 
 @cache
 def session(seed: int, swing: bool = False) -> Session:
-    """A machine's calibration and its session of ``PASSES`` passes (simulated once)."""
-    machine = Machine.draw(seed)
+    """A machine's calibration and its session of ``PASSES`` passes (simulated once); with
+    ``swing``, the swing the model lacks at the bottom of its range."""
     spec = {"swing_centrifugal": SIM_EFFECTS["swing_centrifugal"].typical_range[0]}
-
-    def fx() -> list[object]:
-        return make_effects(dict(spec), form="test") if swing else []
-
-    trials = [simulate_calibration(kg, seed + k, effects=fx(), machine=machine).table
-              for k, kg in ((1, 0.0), (2, 8420.0))]
-    ops = simulate_cycles(PASSES, seed + 3, payload_range=(3000.0, 35000.0),
-                          truck_target_kg=None, effects=fx(), machine=machine)
-    params = Calibrator(method="output").fit(trials).params_
-    assert params is not None
+    params, ops = calibrated_session(spec if swing else {}, seed, PASSES)
     return Session(params, ops.table, ops.passes)
 
 

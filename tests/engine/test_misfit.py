@@ -16,18 +16,20 @@ import pytest
 
 from shoveld.engine.offline import estimate_table
 from shoveld.identify.calibrate import Calibrator
+from shoveld.model.params import ModelParams
 from shoveld.payload.misfit import MISFIT_WARN, misfit_note, round_misfit
 from shoveld.sim.effects import SIM_EFFECTS, make_effects
 from shoveld.sim.machine import Machine
-from shoveld.sim.scenario import simulate_calibration, simulate_cycles
+from shoveld.sim.scenario import SimResult, simulate_calibration, simulate_cycles
 
 PASSES = 12
 
 
-def misfits(spec: dict[str, float], seed: int,
-            caplog: pytest.LogCaptureFixture) -> tuple[list[float], list[str]]:
-    """Each pass's misfit on a realistic machine with the effects of ``spec``, and the
-    engine's warnings, the base model calibrated on that machine's two trials."""
+def calibrated_session(spec: dict[str, float], seed: int, passes: int = PASSES
+                       ) -> tuple[ModelParams, SimResult]:
+    """A realistic machine with the effects of ``spec`` (fresh for each table, in the
+    tests' form): the base model calibrated on its two trials, and ``passes`` passes of
+    3-35 t on it."""
     machine = Machine.draw(seed)
 
     def fx() -> list[object]:
@@ -35,10 +37,18 @@ def misfits(spec: dict[str, float], seed: int,
 
     trials = [simulate_calibration(kg, seed + k, effects=fx(), machine=machine).table
               for k, kg in ((1, 0.0), (2, 8420.0))]
-    ops = simulate_cycles(PASSES, seed + 3, payload_range=(3000.0, 35000.0),
+    ops = simulate_cycles(passes, seed + 3, payload_range=(3000.0, 35000.0),
                           truck_target_kg=None, effects=fx(), machine=machine)
     params = Calibrator(method="output").fit(trials).params_
     assert params is not None
+    return params, ops
+
+
+def misfits(spec: dict[str, float], seed: int,
+            caplog: pytest.LogCaptureFixture) -> tuple[list[float], list[str]]:
+    """Each pass's misfit on a realistic machine with the effects of ``spec``, and the
+    engine's warnings, the base model calibrated on that machine's two trials."""
+    params, ops = calibrated_session(spec, seed)
     caplog.clear()
     with caplog.at_level(logging.WARNING, logger="shoveld.engine.loop"):
         est = estimate_table(ops.table, params)
