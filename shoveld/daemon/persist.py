@@ -88,9 +88,8 @@ class Restored:
     """The last dump on the live clock, "<boot id> <monotonic s>" (see ``write_pass``)."""
     recent_misfits: list[float] = field(default_factory=list)
     """The misfits of the last passes weighed with these params (not those not weighed;
-    at most
-    ``RESTORED_MISFITS``, oldest first): health's count of passes the model did not fit
-    goes on across a restart."""
+    at most ``RESTORED_MISFITS``, oldest first): health's count of passes the model did
+    not fit goes on across a restart."""
     empty_checks: list[float] = field(default_factory=list)
     """The empty dipper's weights of the last returns with these params (at most
     ``RESTORED_EMPTIES``, oldest first), for the same reason."""

@@ -562,10 +562,9 @@ class Service:
             # in doubt"): the passes in a row not weighed for it, and what the laser did
             d = e.crowd_doubt
             loop["crowd_doubt"] = {
-                "doubt": None if d is None else d.what, "usual": None if d is None else
-                round_misfit(d.usual), "limit": None if d is None else round_misfit(d.limit),
-                "refusing": e.doubt_refusing, "last": round_misfit(e.doubt_last_misfit),
-                "passes_refused": e.doubt_refused}
+                "doubt": d.what if d else None, "usual": round_misfit(d.usual if d else None),
+                "limit": round_misfit(d.limit if d else None), "refusing": e.doubt_refusing,
+                "last": round_misfit(e.doubt_last_misfit), "passes_refused": e.doubt_refused}
         zen = self.publisher.health()
         persist = {"passes_written": self.passes_written, "queue": self._q.qsize(),
                    "last_error": self.persist_error}
