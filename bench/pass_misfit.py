@@ -45,25 +45,25 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from shoveld.payload.misfit import MISFIT_WARN
+from shoveld.payload.misfit import MISFIT_RECENT, MISFIT_WARN
 
 
 def doubt_refusals(misfits: list[float]) -> int:
     """The passes the engine would not weigh if the crowd were in doubt before every one
     of them (the worst case of ``CrowdDoubt``: a laser gap before each pass): each judged
-    against ``doubt_factor`` times the median of the last passes weighed before it."""
+    against the engine's ``doubt_limit`` of the median of the last passes weighed before
+    it."""
     from collections import deque
 
-    from shoveld.engine.loop import EngineConfig
+    from shoveld.engine.loop import EngineConfig, doubt_limit
 
-    factor = EngineConfig().doubt_factor
-
-    fits: deque[float] = deque(maxlen=10)
+    cfg = EngineConfig()
+    fits: deque[float] = deque(maxlen=MISFIT_RECENT)  # as the engine keeps them
     refused = 0
     for m in misfits:
         if not math.isfinite(m):
             continue
-        if fits and m > max(MISFIT_WARN, factor * statistics.median(fits)):
+        if fits and m > doubt_limit(statistics.median(fits), cfg):
             refused += 1
         else:
             fits.append(m)

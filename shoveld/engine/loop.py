@@ -106,6 +106,12 @@ class CrowdDoubt:
     """How bad the cause is: infinite for a change of target, else the gap's seconds."""
 
 
+def doubt_limit(usual: float, cfg: EngineConfig) -> float:
+    """The misfit above which a pass is not weighed while the crowd is in doubt, for a
+    machine whose usual misfit is ``usual`` (``bench/pass_misfit.py`` judges by it too)."""
+    return max(cfg.misfit_warn, cfg.doubt_factor * usual)
+
+
 @dataclass(frozen=True)
 class EngineConfig:
     """Per-site settings of the estimator."""
@@ -500,8 +506,7 @@ class Engine:
         if not self.fits or self.cfg.doubt_factor <= 0:
             return
         usual = statistics.median(self.fits)
-        limit = max(self.cfg.misfit_warn, self.cfg.doubt_factor * usual)
-        self.crowd_doubt = CrowdDoubt(what, t, limit, usual, weight)
+        self.crowd_doubt = CrowdDoubt(what, t, doubt_limit(usual, self.cfg), usual, weight)
 
     def _doubt_reason(self, doubt: CrowdDoubt, misfit: float) -> str:
         """Why a pass is not weighed for a crowd in doubt (logged now and then)."""
