@@ -251,19 +251,23 @@ class CabState:
                 target = float(t.get("target_kg") or 0.0)
                 total = float(t.get("total_kg") or 0.0)
                 n = int(t.get("passes") or 0)
+                nw = int(t.get("invalid_passes") or 0)
                 status = str(t.get("status") or "")
                 # A truck being loaded is not "under" yet: say so only once it is sent off.
                 word = ("sent off, " + status.upper() if t.get("closed") else
                         "OVER" if status.startswith("over") else "loading")
-                out.append(f"  truck {t.get('truck', '?')}: {n_of(n, 'pass', 'passes')}, "
-                           f"{total:.0f} of {target:.0f} kg ({t.get('fill_pct', 0)} %)  {word}")
+                out.append(f"  truck {t.get('truck', '?')}: {n_of(n, 'pass', 'passes')}"
+                           + (f" ({nw} not weighed), at least " if nw else ", ")
+                           + f"{total:.0f} of {target:.0f} kg ({t.get('fill_pct', 0)} %)  {word}")
                 if target and not t.get("closed"):
                     recent = [float(p["payload_kg"]) for p in v.passes[-10:]
                               if p.get("valid") and p.get("payload_kg") is not None]
-                    left = target - total
-                    out.append(f"  still to go {max(left, 0.0):.0f} kg" if left > 0 else
-                               f"  over target by {-left:.0f} kg")
-                    out.append("  " + last_pass_hint(total, target, recent)["text"])
+                    hint = last_pass_hint(total, target, recent, nw)
+                    left = hint["remaining_kg"]
+                    if left is not None:
+                        out.append(f"  still to go {max(left, 0.0):.0f} kg" if left > 0 else
+                                   f"  over target by {-left:.0f} kg")
+                    out.append("  " + hint["text"])
                 warn = truck_warning(t)
                 if warn:
                     out.append(f"  !! {warn['text']}")
@@ -285,8 +289,11 @@ class CabState:
                         out.append(f"    pass {i:2d}  INVALID  {p.get('reason', '')}")
                 if v.closed:
                     c = v.closed[-1]
-                    out.append(f"  last truck {c['truck']}: {c['total_kg']:.0f} kg "
-                               f"({c['fill_pct']} %) {c['status']}")
+                    cw = int(c.get("invalid_passes") or 0)
+                    out.append(f"  last truck {c['truck']}: "
+                               + (f"at least {c['total_kg']:.0f} kg ({c['fill_pct']} %), "
+                                  f"{cw} not weighed" if cw else
+                                  f"{c['total_kg']:.0f} kg ({c['fill_pct']} %) {c['status']}"))
                     r = c.get("rule_10_10_20") or {}
                     sh = c.get("shift") or {}
                     if sh.get("trucks"):
@@ -294,11 +301,18 @@ class CabState:
                                    f"{n_of(sh['passes'], 'pass', 'passes')}, "
                                    f"{sh['kg'] / 1000:.1f} t")
                     if r.get("trucks"):
+                        nj = int(r.get("not_judged") or 0)
                         out.append(f"  shift: {n_of(r['trucks'], 'truck', 'trucks')}, "
                                    f"mean fill {r['mean_pct']} %, "
                                    f"{r['over_110_pct']} % over 110 %, {r['over_120']} over "
                                    f"120 % ({'no overload beyond' if r['compliant'] else 'OUTSIDE'}"
-                                   " the 10/10/20 rule)")
+                                   " the 10/10/20 rule)"
+                                   + (f"; {nj} with a pass not weighed not judged" if nj else ""))
+                    elif r.get("not_judged"):
+                        out.append(f"  shift: no truck judged: "
+                                   f"{n_of(r['not_judged'], 'truck', 'trucks')} with a pass "
+                                   "not weighed" + (f"; {r['over_120']} over 120 %, OUTSIDE the "
+                                                    "10/10/20 rule" if r.get("over_120") else ""))
                 if v.problems:
                     out.append("  ! " + "; ".join(v.problems)[: width * 2])
                 out.append("")

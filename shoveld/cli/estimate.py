@@ -9,7 +9,6 @@ import sys
 from shoveld.cli import CliError
 from shoveld.cli.common import read_params, read_tables
 from shoveld.payload.misfit import misfit_note
-from shoveld.words import n_of
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -35,7 +34,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from shoveld.engine.loop import EngineConfig
     from shoveld.engine.offline import estimate_table
-    from shoveld.payload.trucks import rule_101020
+    from shoveld.payload.trucks import rule_101020, rule_summary, truck_line
 
     params = read_params(args.params)
     tables = read_tables(args.files)
@@ -80,13 +79,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         print()
         for t in trucks:
-            d = t.as_dict()
-            print(f"truck {d['truck']:3d}: {n_of(d['passes'], 'pass', 'passes')}, "
-                  f"{d['total_kg']:9.0f} kg of "
-                  f"{d['target_kg']:.0f} kg ({d['fill_pct']:.1f} %), {d['status']}")
-        r = summary["rule_10_10_20"]
-        if r["trucks"]:
-            print(f"10/10/20: mean {r['mean_pct']} % of target, {r['over_110_pct']} % of trucks "
-                  f"over 110 %, {r['over_120']} over 120 % -> "
-                  f"{'compliant' if r['compliant'] else 'NOT compliant'}")
+            print(f"truck {t.index:3d}: {truck_line(t.as_dict())}")
+        if trucks:
+            print(f"10/10/20 over {rule_summary(summary['rule_10_10_20'], closed=False)}")
     return 0

@@ -18,7 +18,6 @@ from typing import Any
 
 from shoveld.cli import CliError
 from shoveld.payload.misfit import misfit_note
-from shoveld.words import n_of
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -121,7 +120,7 @@ def read_window(args: argparse.Namespace
 
 
 def run(args: argparse.Namespace) -> int:
-    from shoveld.payload.trucks import Truck, rule_101020
+    from shoveld.payload.trucks import Truck, rule_101020, rule_summary, truck_line
 
     rows, path, since, until = read_window(args)
     if args.csv:
@@ -152,14 +151,8 @@ def run(args: argparse.Namespace) -> int:
         closed[r["truck"]] = r["truck_closed"]
     print()
     for i, t in trucks.items():
-        d = t.as_dict()
-        print(f"truck {i:4d}: {n_of(d['passes'], 'pass', 'passes')}, {d['total_kg']:9.0f} kg of "
-              f"{d['target_kg']:.0f} kg ({d['fill_pct']:.1f} %), {d['status']}"
-              f"{'' if closed[i] else ' (open)'}")
-    rule = rule_101020([t for i, t in trucks.items() if closed[i]])
-    if rule["trucks"]:
-        print(f"10/10/20 over {n_of(rule['trucks'], 'closed truck', 'closed trucks')}: "
-              f"mean {rule['mean_pct']} % of target, {rule['over_110_pct']} % over 110 %, "
-              f"{rule['over_120']} over 120 % -> "
-              f"{'compliant' if rule['compliant'] else 'NOT compliant'}")
+        print(f"truck {i:4d}: {truck_line(t.as_dict())}{'' if closed[i] else ' (open)'}")
+    if any(closed.values()):
+        rule = rule_101020([t for i, t in trucks.items() if closed[i]])
+        print(f"10/10/20 over {rule_summary(rule)}")
     return 0

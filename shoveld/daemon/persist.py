@@ -15,7 +15,7 @@ import sqlite3
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 from shoveld.payload.misfit import MISFIT_RECENT
 
@@ -331,14 +331,28 @@ class PassLog:
             "AND p.misfit > ?",
             (since_unix, warn)).fetchone()[0])
 
-    def closed_truck_totals(self, since_unix: float) -> list[tuple[int, float, float, int]]:
-        """(truck, total of valid passes, target, passes) of trucks closed since ``since_unix``."""
+    def closed_truck_totals(self, since_unix: float) -> list[ClosedTruck]:
+        """The trucks closed since ``since_unix``, oldest first, with their weighed totals
+        and how many of their passes were not weighed."""
         rows = self.con.execute(
             "SELECT t.truck, coalesce(sum(CASE WHEN p.valid THEN p.payload_kg END), 0), "
-            "t.target_kg, count(p.pass) FROM trucks t LEFT JOIN passes p ON p.truck = t.truck "
+            "t.target_kg, count(p.pass), count(p.pass) - count(CASE WHEN p.valid THEN 1 END) "
+            "FROM trucks t LEFT JOIN passes p ON p.truck = t.truck "
             "WHERE t.closed_unix IS NOT NULL AND t.closed_unix >= ? GROUP BY t.truck "
             "ORDER BY t.truck", (since_unix,)).fetchall()
-        return [(int(a), float(b), float(c), int(d)) for a, b, c, d in rows]
+        return [ClosedTruck(int(a), float(b), float(c), int(d), int(e))
+                for a, b, c, d, e in rows]
+
+
+class ClosedTruck(NamedTuple):
+    """A closed truck as the pass log sums it (:meth:`PassLog.closed_truck_totals`)."""
+
+    truck: int
+    total_kg: float
+    """Its weighed passes' sum (a lower bound of its load when ``not_weighed``)."""
+    target_kg: float
+    passes: int
+    not_weighed: int
 
 
 def _window(since_unix: float | None, until_unix: float | None) -> tuple[float, float]:

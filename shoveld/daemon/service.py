@@ -501,14 +501,16 @@ class Service:
         if self.passlog is not None:
             since = self.clock.wall(self.clock.now()) - 3600.0 * self.cfg.rule_window_h
             closed_trucks = self.passlog.closed_truck_totals(since)
-            trucks = [Truck(i, target, [{"payload_kg": total, "std_kg": 0.0}])
-                      for i, total, target, _ in closed_trucks]
+            trucks = [Truck(c.truck, c.target_kg, [{"payload_kg": c.total_kg, "std_kg": 0.0}]
+                            + [{"payload_kg": None, "valid": False}] * c.not_weighed)
+                      for c in closed_trucks]
             msg["rule_10_10_20"] = {"window_h": self.cfg.rule_window_h, **rule_101020(trucks)}
             # The shift so far from the pass log, so that a screen started mid-shift (or
             # restarted) shows the same totals as one that watched the whole shift.
             msg["shift"] = {"window_h": self.cfg.rule_window_h, "trucks": len(closed_trucks),
-                            "passes": sum(n for *_, n in closed_trucks),
-                            "kg": round(sum(total for _, total, _, _ in closed_trucks), 1),
+                            "passes": sum(c.passes for c in closed_trucks),
+                            "kg": round(sum(c.total_kg for c in closed_trucks), 1),
+                            "not_weighed": sum(c.not_weighed for c in closed_trucks),
                             "misfit_high": self.passlog.closed_trucks_misfit_high(
                                 since, self.cfg.engine.misfit_warn)}
         return msg

@@ -54,7 +54,9 @@ def _plots(f: ShiftFigures) -> dict[str, bytes]:
         ax.set_ylabel("passes")
         ax.set_title("Pass payloads")
         save("pass_payloads", fig)
-    fills = [t["fill_pct"] for t in f.trucks if t["closed"]]
+    # a truck with a pass not weighed has a fill known only from below: left out
+    fills = [t["fill_pct"] for t in f.trucks if t["closed"] and not t["invalid_passes"]]
+    short = sum(1 for t in f.trucks if t["closed"] and t["invalid_passes"])
     if fills:
         fig, ax = plt.subplots(figsize=(6, 3.6))
         ax.hist(fills, bins=15, color="#2b6cb0")
@@ -62,7 +64,9 @@ def _plots(f: ShiftFigures) -> dict[str, bytes]:
             ax.axvline(x, color=c, linestyle="--", linewidth=1.5)
         ax.set_xlabel("truck fill (% of target)")
         ax.set_ylabel("trucks")
-        ax.set_title("Truck fill (closed trucks)")
+        ax.set_title("Truck fill (closed trucks" + (
+            f"; {n_of(short, 'truck', 'trucks')} with a pass not weighed left out)"
+            if short else ")"))
         save("truck_fill", fig)
     if f.empties:
         fig, ax = plt.subplots(figsize=(8, 3.6))
@@ -157,6 +161,10 @@ def write_report(f: ShiftFigures, out: Path, title: str = "Shift report") -> Pat
         + "</p>",
         "<h2>10/10/20 rule (closed trucks)</h2>",
     ]
+    nj = int(r.get("not_judged") or 0)
+    skipped = (f" {n_of(nj, 'truck', 'trucks')} with a pass not weighed "
+               f"{'was' if nj == 1 else 'were'} not judged: their loads are known only "
+               "from below." if nj else "")
     if r.get("trucks"):
         lines.append(
             f"<p id='rule'>{n_of(r['trucks'], 'truck', 'trucks')}, "
@@ -166,15 +174,22 @@ def write_report(f: ShiftFigures, out: Path, title: str = "Shift report") -> Pat
             + ("" if r["compliant"] else " class='bad'") + ">"
             + ("within the rule" if r["compliant"] else "OUTSIDE the rule") + "</b>."
             + (" Trucks are being sent under-loaded (mean below 90 %)."
-               if r["mean_pct"] < 90 else "") + "</p>")
+               if r["mean_pct"] < 90 else "") + e(skipped) + "</p>")
+    elif nj:
+        over = (f" {r['over_120']} over 120 % by their weighed passes alone: "
+                "<b class='bad'>OUTSIDE the rule</b>." if r.get("over_120") else "")
+        lines.append(f"<p id='rule'>No truck judged.{e(skipped)}{over}</p>")
     else:
         lines.append("<p>No truck was closed in this period.</p>")
     lines += ["<h2>Trucks</h2><table id='trucks'><tr><th>truck</th><th>passes</th>"
               "<th>loaded (t)</th><th>target (t)</th><th>fill</th><th>status</th></tr>"]
     for t in f.trucks:
         cls = " class='bad'" if t["status"].startswith("over") else ""
-        lines.append(f"<tr{cls}><td>{t['truck']}</td><td>{t['passes']}</td>"
-                     f"<td>{t['total_kg'] / 1000:.1f}</td><td>{t['target_kg'] / 1000:.0f}</td>"
+        nw = int(t.get("invalid_passes") or 0)
+        lines.append(f"<tr{cls}><td>{t['truck']}</td><td>{t['passes']}"
+                     + (f" ({nw} not weighed)" if nw else "") + "</td>"
+                     f"<td>{'&ge; ' if nw else ''}{t['total_kg'] / 1000:.1f}</td>"
+                     f"<td>{t['target_kg'] / 1000:.0f}</td>"
                      f"<td>{t['fill_pct']} %</td><td>{e(t['status'])}"
                      f"{'' if t['closed'] else ' (open)'}</td></tr>")
     lines.append("</table>")

@@ -21,22 +21,42 @@ SILENT_AFTER_S = 3.0
 """A shovel not heard from for this long is shown as silent (health comes every 1 s)."""
 RECENT_PASSES = 10
 """Passes of this shovel the last-pass hint takes its typical pass size from."""
+NO_SHIFT: dict[str, float] = {"trucks": 0, "passes": 0, "kg": 0.0, "not_weighed": 0}
+"""A shift with no closed truck seen yet."""
 
 
-def last_pass_hint(total_kg: float, target_kg: float, recent_kg: list[float]) -> dict[str, Any]:
+def last_pass_hint(total_kg: float, target_kg: float, recent_kg: list[float],
+                   not_weighed: int = 0) -> dict[str, Any]:
     """What the next pass should carry to top the truck off without passing 110 %.
 
     From the remaining load and this shovel's recent pass sizes: when one typical pass
     (or less) is left, the last pass should carry the remaining, and at most what keeps
     the truck at 110 %; otherwise the passes still needed and the size of each.
+
+    ``not_weighed`` passes are in the truck but not in ``total_kg``: the hint counts each
+    as a typical pass and says so, as a hint that left them out would ask for more than
+    the truck can take; with no typical pass yet it says the load is not known.
     """
+    typical = sum(recent_kg) / len(recent_kg) if recent_kg else math.nan
+    known = math.isfinite(typical) and typical > 0.0
+    note = ""
+    if not_weighed:
+        if not known:
+            return {"kind": "unknown", "remaining_kg": None, "passes_left": None,
+                    "text": f"{n_of(not_weighed, 'pass', 'passes')} not weighed: "
+                            "the truck's load is not known"}
+        if total_kg >= target_kg:  # full by the weighed passes alone: nothing to count
+            return {"kind": "full", "text": "Truck full: send it",
+                    "remaining_kg": target_kg - total_kg, "passes_left": 0}
+        total_kg += not_weighed * typical
+        note = (f", counting the {'pass' if not_weighed == 1 else 'passes'} not weighed "
+                f"as {typical / 1000:.1f} t" + (" each" if not_weighed > 1 else ""))
     remaining = target_kg - total_kg
     limit = 1.10 * target_kg - total_kg
-    typical = sum(recent_kg) / len(recent_kg) if recent_kg else math.nan
     if remaining <= 0.0:
-        return {"kind": "full", "text": "Truck full: send it",
+        return {"kind": "full", "text": "Truck full: send it" + note,
                 "remaining_kg": remaining, "passes_left": 0}
-    if not math.isfinite(typical) or typical <= 0.0:
+    if not known:
         return {"kind": "unknown", "text": f"{remaining / 1000:.1f} t to go",
                 "remaining_kg": remaining, "passes_left": None}
     left = max(1, math.ceil(remaining / typical - 0.1))
@@ -44,10 +64,11 @@ def last_pass_hint(total_kg: float, target_kg: float, recent_kg: list[float]) ->
         return {"kind": "last", "remaining_kg": remaining, "passes_left": 1,
                 "carry_kg": remaining, "max_kg": limit,
                 "text": f"Last pass: carry {remaining / 1000:.1f} t "
-                        f"(at most {limit / 1000:.1f} t)"}
+                        f"(at most {limit / 1000:.1f} t)" + note}
     each = remaining / left
     return {"kind": "more", "remaining_kg": remaining, "passes_left": left, "carry_kg": each,
-            "text": f"{n_of(left, 'pass', 'passes')} left, about {each / 1000:.1f} t each"}
+            "text": f"{n_of(left, 'pass', 'passes')} left, about {each / 1000:.1f} t each"
+                    + note}
 
 
 def doubtful_note(passes: list[dict[str, Any]]) -> str | None:
@@ -67,7 +88,8 @@ def doubtful_note(passes: list[dict[str, Any]]) -> str | None:
 
 
 def truck_warning(truck: dict[str, Any] | None) -> dict[str, str] | None:
-    """An over-load warning (or an under-load one once the truck is closed)."""
+    """An over-load warning, one for a truck with a pass not weighed (its load is known
+    only from below), or an under-load one once the truck is closed."""
     if not truck:
         return None
     status = str(truck.get("status") or "")
@@ -76,6 +98,13 @@ def truck_warning(truck: dict[str, Any] | None) -> dict[str, str] | None:
         return {"level": "alarm", "text": f"OVERLOADED: {fill} % of target (over 120 %)"}
     if status == "over_110":
         return {"level": "warn", "text": f"Over 110 %: {fill} % of target"}
+    if status == "incomplete":
+        n = int(truck.get("invalid_passes") or 0)
+        what = n_of(n, "pass", "passes") if n else "a pass"
+        return {"level": "warn",
+                "text": (f"Sent off with {what} not weighed: at least {fill} % of target"
+                         if truck.get("closed") else
+                         f"{what} not weighed: the truck has at least {fill} % of target")}
     if status == "under" and truck.get("closed"):
         return {"level": "warn", "text": f"Left under-loaded: {fill} % of target"}
     return None
@@ -118,10 +147,11 @@ class ScreenState(CabState):
                     r.append(float(msg["payload_kg"]))
                     del r[:-RECENT_PASSES]
                 if topic == "truck" and msg.get("closed"):
-                    s = self.shift.setdefault(shovel, {"trucks": 0, "passes": 0, "kg": 0.0})
+                    s = self.shift.setdefault(shovel, dict(NO_SHIFT))
                     s["trucks"] += 1
                     s["passes"] += int(msg.get("passes") or 0)
                     s["kg"] += float(msg.get("total_kg") or 0.0)
+                    s["not_weighed"] += int(msg.get("invalid_passes") or 0)
             self.lines.clear()  # (the terminal's line log is not used here)
         self._changed()
 
@@ -162,15 +192,14 @@ class ScreenState(CabState):
         message carries one (true however late this screen started), else what was seen.
         ``misfit_high``: its passes the model did not fit, None when the daemon does not
         count them (older than the count, or no ``shift`` at all)."""
-        seen = {**self.shift.get(shovel, {"trucks": 0, "passes": 0, "kg": 0.0}),
-                "misfit_high": None}
+        seen = {**self.shift.get(shovel, NO_SHIFT), "misfit_high": None}
         ds = truck.get("shift")
         if not isinstance(ds, dict):
             return seen
         try:
             marked = ds.get("misfit_high")
             return {"trucks": int(ds["trucks"]), "passes": int(ds["passes"]),
-                    "kg": float(ds["kg"]),
+                    "kg": float(ds["kg"]), "not_weighed": int(ds.get("not_weighed") or 0),
                     "misfit_high": None if marked is None else int(marked)}
         except (KeyError, TypeError, ValueError):
             return seen
@@ -194,6 +223,9 @@ class ScreenState(CabState):
             problems.insert(0, f"link: {self.link} {self.link_detail}".strip())
         shift = self._shift_closed(v.shovel, truck)
         is_open = bool(truck) and not truck.get("closed")
+        not_weighed = int(truck.get("invalid_passes") or 0)
+        hint = (last_pass_hint(total, target, self.recent.get(v.shovel, []), not_weighed)
+                if target and is_open else None)
         passes = [{k: p.get(k) for k in ("pass", "truck", "payload_kg", "std_kg", "valid",
                                           "reason", "end", "misfit", "misfit_high")}
                   for p in v.passes if not truck or p.get("truck") == truck.get("truck")]
@@ -205,16 +237,16 @@ class ScreenState(CabState):
             "std_kg": live.get("std_kg") if valid else None,
             "valid": valid,
             "truck": truck or None,
-            "remaining_kg": (target - total) if target else None,
-            "hint": (last_pass_hint(total, target, self.recent.get(v.shovel, []))
-                     if target and not truck.get("closed") else
-                     {"kind": "closed", "text": f"Truck {truck.get('truck')} sent off: "
+            "remaining_kg": hint.get("remaining_kg") if hint else
+                            (target - total) if target else None,
+            "hint": hint if hint else
+                    ({"kind": "closed", "text": f"Truck {truck.get('truck')} sent off: "
                       "waiting for the next truck"} if truck.get("closed") else None),
             "warning": truck_warning(truck),
             "passes": passes,
             "doubt": doubtful_note(passes),
             "closed": [{k: c.get(k) for k in ("truck", "passes", "total_kg", "target_kg",
-                                               "fill_pct", "status")}
+                                               "fill_pct", "status", "invalid_passes")}
                        for c in v.closed[-5:]][::-1],
             "rule": (v.closed[-1].get("rule_10_10_20") if v.closed
                      else truck.get("rule_10_10_20")),
@@ -222,6 +254,7 @@ class ScreenState(CabState):
                       "passes": shift["passes"] + (int(truck.get("passes") or 0)
                                                    if is_open else 0),
                       "kg": shift["kg"] + (total if is_open else 0.0),
+                      "not_weighed": shift["not_weighed"] + (not_weighed if is_open else 0),
                       "misfit_high": None if shift["misfit_high"] is None else
                       shift["misfit_high"] + (sum(bool(p["valid"] and p["misfit_high"])
                                                   for p in passes) if is_open else 0)},

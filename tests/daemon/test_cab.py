@@ -60,6 +60,42 @@ def test_screen_shows_live_passes_truck_and_problems() -> None:
     assert "no valid estimate" in state.screen()
 
 
+def test_a_truck_with_a_pass_not_weighed_is_at_least_its_weighed_total() -> None:
+    """The daemon's truck counts a pass it did not weigh in ``invalid_passes``: the screen
+    says the load is at least the weighed total, the hint counts that pass as a typical
+    one (without it, it asked for a pass more than the truck can take), and the shift's
+    10/10/20 line says which trucks it could not judge."""
+    state = CabState()
+    state.on_status("s7", {"truck": {"truck": 4, "passes": 0, "total_kg": 0.0,
+                                     "target_kg": 136000.0, "fill_pct": 0.0, "status": "under"},
+                           "truck_passes": []})
+    for n, valid in enumerate([True, False, True], 11):
+        state.on_message("s7", "pass", {"pass": n, "truck": 4, "valid": valid,
+                                        "payload_kg": 34000.0 if valid else None,
+                                        "std_kg": 250.0 if valid else None, "end": T,
+                                        "reason": "" if valid else "the crowd laser may not"})
+    state.on_message("s7", "truck", {"truck": 4, "passes": 3, "total_kg": 68000.0,
+                                     "target_kg": 136000.0, "fill_pct": 50.0,
+                                     "status": "incomplete", "invalid_passes": 1})
+    screen = state.screen()
+    assert "truck 4: 3 passes (1 not weighed), at least 68000 of 136000 kg (50.0 %)" in screen
+    # 68 t weighed and a typical 34 t not weighed: one pass to go, not two
+    assert "still to go 34000 kg" in screen
+    assert "Last pass: carry 34.0 t (at most 47.6 t), counting the pass not weighed as " \
+           "34.0 t" in screen
+    assert "!! 1 pass not weighed: the truck has at least 50.0 % of target" in screen
+    state.on_message("s7", "truck", {
+        "truck": 4, "passes": 3, "total_kg": 68000.0, "target_kg": 136000.0,
+        "fill_pct": 50.0, "status": "incomplete", "invalid_passes": 1, "closed": True,
+        "rule_10_10_20": {"trucks": 0, "not_judged": 1, "over_120": 0, "compliant": True},
+        "shift": {"trucks": 1, "passes": 3, "kg": 68000.0, "not_weighed": 1}})
+    screen = state.screen()
+    assert "last truck 4: at least 68000 kg (50.0 %), 1 not weighed" in screen
+    assert "!! Sent off with 1 pass not weighed: at least 50.0 % of target" in screen
+    assert "shift: no truck judged: 1 truck with a pass not weighed" in screen
+    assert "UNDER" not in screen.split("last truck")[1]
+
+
 def send_off(state: CabState, truck: int, passes: int, total_kg: float, status: str,
              mean_pct: float, shift: tuple[int, int, float]) -> None:
     """A truck sent off, as the daemon publishes it: with the shift's 10/10/20 summary

@@ -54,7 +54,7 @@ def test_closed_truck_starts_the_next_one(tmp_path: Path) -> None:
     log.close_truck(1, 62000.0, T0 + 5)
     r = log.restore()
     assert r.next_pass == 3 and r.truck == 2 and r.truck_passes == []
-    assert log.closed_truck_totals(T0) == [(1, 60000.0, 62000.0, 2)]
+    assert log.closed_truck_totals(T0) == [(1, 60000.0, 62000.0, 2, 0)]
     log.write_pass(p(3, 2), T0 + 30, T0 + 31, 62000.0)
     r = log.restore()
     assert r.truck == 2 and [x["pass"] for x in r.truck_passes] == [3]
@@ -67,6 +67,19 @@ def test_a_pass_is_never_written_twice(tmp_path: Path) -> None:
     rows = read_passes(db_path(tmp_path))
     assert len(rows) == 1 and rows[0]["payload_kg"] == 30000.0
     assert not log.con.in_transaction
+
+
+def test_closed_trucks_count_their_passes_not_weighed(tmp_path: Path) -> None:
+    """The shift's closed trucks as the daemon sums them for the 10/10/20 rule: a truck
+    with a pass not weighed carries the count, and its total is the weighed passes'."""
+    log = PassLog(db_path(tmp_path), "s1")
+    log.write_pass(p(1, 1), T0, T0 + 1, 62000.0)
+    log.write_pass(p(2, 1, valid=False), T0 + 2, T0 + 3, 62000.0)
+    log.close_truck(1, 62000.0, T0 + 5)
+    log.close_truck(2, 62000.0, T0 + 6)  # sent off with no pass: nothing not weighed
+    got = log.closed_truck_totals(T0)
+    assert got == [(1, 30000.0, 62000.0, 2, 1), (2, 0.0, 62000.0, 0, 0)]
+    assert got[0].not_weighed == 1 and got[0].total_kg == 30000.0
 
 
 def test_readers_work_while_the_writer_holds_the_log(tmp_path: Path) -> None:
@@ -102,7 +115,9 @@ def test_passes_export(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> No
     line3 = next(ln for ln in text.splitlines() if ln.startswith("pass     3"))
     assert line3.endswith("misfit 18.2: the model does not fit this pass")
     assert "misfit" not in next(ln for ln in text.splitlines() if ln.startswith("pass     4"))
-    assert "truck    2: 2 passes" in text and "(open)" in text
+    # pass 4 was not weighed: the open truck's 40 t is its load's lower bound, not "under"
+    assert "truck    2: 2 passes (1 not weighed), at least 40000 kg of 62000 kg " \
+           "(64.5 %), incomplete (open)" in text
     assert main(["passes", "--state-dir", str(tmp_path)]) == 0
     text = capsys.readouterr().out
     assert "10/10/20 over 1 closed truck:" in text  # not "1 closed trucks"

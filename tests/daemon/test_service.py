@@ -176,6 +176,12 @@ def test_invalid_inputs_are_said_not_published_as_numbers(
     # the truck total counts valid passes only, and says how many were invalid
     closed = [t for t in col.of("truck") if t["closed"]]
     assert closed[0]["invalid_passes"] == 2 and closed[0]["total_kg"] == 0.0
+    # its load is not known, so it is neither "under" nor judged by the 10/10/20 rule, and
+    # the shift counts its passes not weighed
+    assert closed[0]["status"] == "incomplete"
+    assert closed[0]["rule_10_10_20"]["trucks"] == 0
+    assert closed[0]["rule_10_10_20"]["not_judged"] == 1
+    assert closed[0]["shift"]["not_weighed"] == 2
 
 
 def test_restart_restores_the_current_truck(tmp_path: Path, e2e_table: SignalsTable,

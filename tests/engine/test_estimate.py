@@ -12,7 +12,7 @@ import pytest
 from shoveld.cli import main
 from shoveld.engine.offline import estimate_table
 from shoveld.model.params import ModelParams, load_params
-from shoveld.payload.trucks import Truck, rule_101020
+from shoveld.payload.trucks import Truck, rule_101020, rule_summary, truck_line
 from shoveld.sim.scenario import RATED_PAYLOAD_KG, SimResult, simulate_cycles
 
 
@@ -67,6 +67,41 @@ def test_trucks_and_rule() -> None:
     assert rule_101020(ok)["compliant"]
     assert not rule_101020(ok[:8] + [truck(8, 115), truck(9, 115)])["compliant"]
     assert not rule_101020([truck(1, 90), truck(2, 121)])["compliant"]
+
+
+def test_a_truck_with_a_pass_not_weighed_is_known_only_from_below() -> None:
+    """A pass the engine did not weigh still went into the truck: its weighed total is a
+    lower bound, so the truck is neither under nor within target, and the 10/10/20 rule
+    leaves it out of the mean and the 110 % share, but counts it over 120 % when its
+    weighed passes alone are."""
+    def truck(i: int, weighed: float, not_weighed: int = 0) -> Truck:
+        return Truck(i, 100.0, [{"payload_kg": weighed, "std_kg": 1.0}]
+                     + [{"payload_kg": None, "std_kg": None, "valid": False}] * not_weighed)
+
+    assert truck(1, 80, 1).status == "incomplete" and truck(1, 105, 2).status == "incomplete"
+    assert truck(1, 115, 1).status == "over_110" and truck(1, 125, 1).status == "over_120"
+    d = truck(1, 80, 2).as_dict()
+    assert (d["passes"], d["invalid_passes"], d["total_kg"]) == (3, 2, 80.0)
+    # nine trucks at 95 %, one short by a pass not weighed: the mean is the nine's, not
+    # pulled down by the short one
+    fleet = [truck(i, 95) for i in range(9)] + [truck(9, 40, 1)]
+    r = rule_101020(fleet)
+    assert (r["trucks"], r["not_judged"], r["mean_pct"]) == (9, 1, 95.0) and r["compliant"]
+    assert "9 closed trucks: mean 95.0 % of target" in rule_summary(r)
+    assert "; 1 truck with a pass not weighed not judged -> compliant" in rule_summary(r)
+    # one over 110 % in ten is allowed, but it is judged among the nine that were weighed
+    r = rule_101020(fleet[:8] + [truck(8, 115)] + fleet[9:])
+    assert r["over_110_pct"] == 11.1 and not r["compliant"]
+    # over 120 % by its weighed passes alone: an overload whatever was not weighed
+    r = rule_101020([truck(1, 95), truck(2, 121, 1)])
+    assert (r["trucks"], r["not_judged"], r["over_120"]) == (1, 1, 1) and not r["compliant"]
+    r = rule_101020([truck(1, 60, 1)])
+    assert (r["trucks"], r["not_judged"], r["compliant"]) == (0, 1, True)
+    assert rule_summary(r) == "no truck judged: 1 truck with a pass not weighed not judged"
+    assert rule_summary(rule_101020([])) == "no closed truck"
+    assert truck_line(truck(3, 40, 1).as_dict()) == \
+        "2 passes (1 not weighed), at least 40 kg of 100 kg (40.0 %), incomplete"
+    assert truck_line(truck(3, 40).as_dict()) == "1 pass, 40 kg of 100 kg (40.0 %), under"
 
 
 def test_cli_round_trip(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -55,13 +55,20 @@ def test_report_tables_and_page(tmp_path: Path) -> None:
         assert float(r["total_kg"]) == pytest.approx(want, abs=0.05)
         assert r["closed"] == ("1" if k < 6 else "0")
     assert trucks[3]["status"] == "over_110" and trucks[2]["invalid_passes"] == "1"
+    # truck 2's pass not weighed: its total is a lower bound, neither under nor ok
+    assert trucks[2]["status"] == "incomplete"
+    assert {trucks[k]["status"] for k in (1, 4, 5)} <= {"under", "ok"}
     hours = list(csv.DictReader(open(out / "hours.csv")))
     assert sum(float(h["tonnes"]) for h in hours) == pytest.approx(
         sum(p["payload_kg"] for p in made if p["valid"]) / 1000, abs=0.05)
     assert sum(int(h["passes"]) for h in hours) == len(made)
     page = (out / "index.html").read_text()
-    # the 10/10/20 line over the five closed trucks: one of five over 110 % is 20 %
-    assert "5 trucks" in page and "20.0 % over 110 %" in page and "OUTSIDE the rule" in page
+    # the 10/10/20 line over the closed trucks whose passes were all weighed: one of four
+    # over 110 % is 25 %; truck 2, with a pass not weighed, is said not to be judged
+    assert "4 trucks" in page and "25.0 % over 110 %" in page and "OUTSIDE the rule" in page
+    assert "1 truck with a pass not weighed was not judged" in page
+    row2 = page[page.index("<td>2</td>", page.index("id='trucks'")):]
+    assert row2.startswith("<td>2</td><td>4 (1 not weighed)</td><td>&ge; ")
     assert "laser silent" in page
     assert page.count("data:image/png;base64,") == 4  # every plot inside the one file
     for name in ("tonnes_per_hour", "pass_payloads", "truck_fill", "cycle_times"):

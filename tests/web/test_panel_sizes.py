@@ -10,6 +10,7 @@ from collections.abc import Iterator
 
 import pytest
 
+from shoveld.payload.trucks import Truck, rule_101020
 from shoveld.web.browser import open_browser
 from shoveld.web.server import ThreadedScreen
 from shoveld.web.state import ScreenState
@@ -121,29 +122,34 @@ def full_screen() -> Iterator[ThreadedScreen]:
     st.set_link("up", "test")
     st.on_alive("s1", True)
     n = 0
+    closed: list[Truck] = []
     for k in range(1, 6):
-        for _ in range(4):
+        truck = Truck(k, 136000.0)
+        for i in range(4):
             n += 1
-            st.on_message("s1", "pass", {"pass": n, "truck": k, "payload_kg": 33000.0,
-                                         "std_kg": 300.0, "valid": True})
-        st.on_message("s1", "truck", {"truck": k, "passes": 4, "total_kg": 132000.0,
-                                      "target_kg": 136000.0, "fill_pct": 97.1,
-                                      "status": "ok", "closed": True, "rule_10_10_20": {
-                                          "trucks": k, "mean_pct": 97.1, "over_110_pct": 0.0,
-                                          "over_120": 0, "compliant": True}})
-    loads = [33400.0, 34700.0, 34100.0, 34900.0, 20100.0]
-    for i, p in enumerate(loads):
+            weighed = not (k == 5 and i == 1)  # truck 5 left with a pass not weighed
+            p = {"pass": n, "truck": k, "payload_kg": 33000.0 if weighed else None,
+                 "std_kg": 300.0 if weighed else None, "valid": weighed,
+                 "reason": "" if weighed else NOT_WEIGHED}
+            truck.passes.append(p)
+            st.on_message("s1", "pass", p)
+        closed.append(truck)
+        st.on_message("s1", "truck", {**truck.as_dict(), "closed": True,
+                                      "rule_10_10_20": rule_101020(closed)})
+    # the truck being loaded, as the daemon sends it: its total the weighed passes', over
+    # 110 % by them alone with the third not weighed
+    loads = [33400.0, 34700.0, 34100.0, 34900.0, 47100.0]
+    truck = Truck(6, 136000.0)
+    for i, kg in enumerate(loads):
         n += 1
         weighed = i != 2  # the third not weighed, for the longest reason the engine gives
-        st.on_message("s1", "pass", {"pass": n, "truck": 6, "payload_kg": p if weighed else None,
-                                     "std_kg": 300.0 if weighed else None, "valid": weighed,
-                                     "reason": "" if weighed else NOT_WEIGHED,
-                                     "misfit": 6.24 - 5 * (i != 3), "misfit_high": i == 3})
-        total = sum(loads[:i + 1])
-        st.on_message("s1", "truck", {"truck": 6, "passes": i + 1, "total_kg": total,
-                                      "target_kg": 136000.0,
-                                      "fill_pct": round(100 * total / 136000.0, 1),
-                                      "status": "over_110" if total > 149600 else "under"})
+        p = {"pass": n, "truck": 6, "payload_kg": kg if weighed else None,
+             "std_kg": 300.0 if weighed else None, "valid": weighed,
+             "reason": "" if weighed else NOT_WEIGHED,
+             "misfit": 6.24 - 5 * (i != 3), "misfit_high": i == 3}
+        truck.passes.append(p)
+        st.on_message("s1", "pass", p)
+        st.on_message("s1", "truck", truck.as_dict())
     st.on_message("s1", "joints", {"handle_deg": 18.0, "crowd_m": 9.1, "boom_deg": 45.0,
                                    "swing_deg": 82.0, "invalid": []})
     st.on_message("s1", "health", {"problems": [
@@ -189,6 +195,17 @@ def test_a_ten_inch_panel_shows_the_whole_cab_page_without_scrolling(
         rows = b.execute_script("return document.querySelectorAll('#trucks tr').length")
         assert rows == 5
         assert b.find_element("id", "warning").text.startswith("Over 110 %")
+        # a pass not weighed: the truck's load is "at least", here and in the last trucks,
+        # and the 10/10/20 line says which truck it did not judge
+        assert b.find_element("id", "truck-total").text == "≥ 150.1 t"
+        last = b.execute_script("const r = document.querySelector('#trucks tr');"
+                                "return [...Array.from(r.cells).map(c => c.textContent),"
+                                " r.cells[4].title]")
+        assert last == ["5", "4", "≥ 99.0", "72.8 %", "?",
+                        "1 pass not weighed: its load is not known"], last
+        assert b.find_element("id", "shift").text == (
+            "4 of 5 trucks, mean 97.1 % of target, 0 % over 110 %, 0 over 120 % — within the "
+            "10/10/20 rule")
         # the pass the model did not fit is marked, and the note under the list says why
         marked = b.execute_script(
             "return Array.from(document.querySelectorAll('#passes tr.doubtful-pass'))"
@@ -247,7 +264,8 @@ def test_a_ten_inch_panel_shows_the_whole_cab_page_without_scrolling(
 def fleet() -> Iterator[ThreadedScreen]:
     """Six shovels in the middle of their trucks, each heard every half second; the last
     with two passes this shift the model did not fit and the three payload problems health
-    can name, the longest a card shows."""
+    can name, the longest a card shows; the fifth with three passes not weighed this
+    shift, one of them in its truck."""
     st = ScreenState()
     st.set_link("up", "test")
     ids = [f"shovel-{k:02d}" for k in range(1, 7)]
@@ -261,6 +279,11 @@ def fleet() -> Iterator[ThreadedScreen]:
                                      "status": "under", "shift": {
                                          "trucks": 11, "passes": 48, "kg": 1_460_000.0,
                                          "misfit_high": 2}})
+    st.on_message(ids[4], "truck", {"truck": 15, "passes": 4, "total_kg": 93005.0,
+                                    "target_kg": 136000.0, "fill_pct": 68.4,
+                                    "status": "incomplete", "invalid_passes": 1, "shift": {
+                                        "trucks": 11, "passes": 48, "kg": 1_460_000.0,
+                                        "not_weighed": 2, "misfit_high": 0}})
     st.on_message(ids[-1], "health", {"ok": False, "problems": [
         "payload: the model did not fit 6 of the last 10 passes (misfit above 3): it lacks "
         "something this machine does, or a sensor measures something else; shoveld "
@@ -301,6 +324,11 @@ def test_the_office_sees_a_fleet_of_six_on_one_screen(fleet: ThreadedScreen, wid
         texts = b.execute_script(
             "return Array.from(document.querySelectorAll('#cards > *')).map(e => e.innerText)")
         assert [("2 passes the model did not fit" in t) for t in texts] == [False] * 5 + [True]
+        # passes not weighed: the truck's and the shift's tonnes are "at least", and the
+        # card says how many
+        assert "truck 15: ≥ 93.0 t of 136 t, 4 passes, 1 not weighed" in texts[4], texts[4]
+        assert "this shift: 52 passes, ≥ 1553.0 t in 12 trucks; 3 not weighed" in texts[4]
+        assert [("not weighed" in t or "≥" in t) for t in texts] == [False] * 4 + [True, False]
         # the problems whole where the screen has room for them (1920 x 1080, 1366 x 768),
         # else each one's head (at 1024 x 768 the whole three ran 73 px off the screen),
         # and the whole of each where the pointer rests

@@ -61,11 +61,12 @@ def test_a_closed_truck_counts_once_in_the_shift() -> None:
                                   "target_kg": 136000.0, "status": "ok", "closed": True})
     s = st.snapshot()["shovels"][0]
     assert s["truck"]["closed"] and s["hint"]["kind"] == "closed"
-    assert s["shift"] == {"trucks": 1, "passes": 4, "kg": 130000.0, "misfit_high": None}
+    assert s["shift"] == {"trucks": 1, "passes": 4, "kg": 130000.0, "not_weighed": 0,
+                          "misfit_high": None}
     st.on_message("s1", "truck", {"truck": 2, "passes": 1, "total_kg": 30000.0,
                                   "target_kg": 136000.0, "status": "under"})
     assert st.snapshot()["shovels"][0]["shift"] == {"trucks": 2, "passes": 5, "kg": 160000.0,
-                                                    "misfit_high": None}
+                                                    "not_weighed": 0, "misfit_high": None}
 
 
 def test_the_shift_comes_from_the_daemons_pass_log_when_it_says_so() -> None:
@@ -76,12 +77,14 @@ def test_the_shift_comes_from_the_daemons_pass_log_when_it_says_so() -> None:
         "status": "under", "shift": {"window_h": 12.0, "trucks": 8, "passes": 37,
                                      "kg": 1_050_000.0}}})
     assert st.snapshot()["shovels"][0]["shift"] == {"trucks": 9, "passes": 39,
-                                                    "kg": 1_110_000.0, "misfit_high": None}
+                                                    "kg": 1_110_000.0, "not_weighed": 0,
+                                                    "misfit_high": None}
     st.on_message("s1", "truck", {"truck": 9, "passes": 4, "total_kg": 130000.0,
                                   "target_kg": 136000.0, "status": "ok", "closed": True,
                                   "shift": {"trucks": 9, "passes": 41, "kg": 1_180_000.0}})
     assert st.snapshot()["shovels"][0]["shift"] == {"trucks": 9, "passes": 41,
-                                                    "kg": 1_180_000.0, "misfit_high": None}
+                                                    "kg": 1_180_000.0, "not_weighed": 0,
+                                                    "misfit_high": None}
 
 
 def test_passes_the_model_did_not_fit_are_marked_by_the_daemons_word() -> None:
@@ -129,3 +132,47 @@ def test_the_shift_counts_the_passes_the_model_did_not_fit() -> None:
                                      "std_kg": 200.0, "valid": valid, "misfit": 5.0,
                                      "misfit_high": high})
     assert st.snapshot()["shovels"][0]["shift"]["misfit_high"] == 3
+
+
+def test_a_pass_not_weighed_is_not_taken_for_an_empty_one() -> None:
+    """A truck with a pass the engine did not weigh has a load known only from below. The
+    last-pass hint counts that pass as the shovel's typical one and says so, where leaving
+    it out would ask the operator for a pass more than the truck can take; with no typical
+    pass it says the load is not known. The warning, the closed trucks and the shift say
+    how many were not weighed."""
+    st = ScreenState()
+    st.on_alive("s1", True)
+    shift = {"trucks": 8, "passes": 37, "kg": 1_050_000.0, "not_weighed": 2,
+             "misfit_high": 0}
+    st.on_message("s1", "truck", {"truck": 9, "passes": 0, "total_kg": 0.0,
+                                  "target_kg": 136000.0, "status": "under", "shift": shift})
+    for n, valid in enumerate([True, True, False], 40):
+        st.on_message("s1", "pass", {"pass": n, "truck": 9, "valid": valid,
+                                     "payload_kg": 34000.0 if valid else None,
+                                     "std_kg": 200.0 if valid else None,
+                                     "reason": "" if valid else "the crowd laser may not be"})
+    st.on_message("s1", "truck", {"truck": 9, "passes": 3, "total_kg": 68000.0,
+                                  "target_kg": 136000.0, "fill_pct": 50.0,
+                                  "status": "incomplete", "invalid_passes": 1,
+                                  "shift": shift})
+    s = st.snapshot()["shovels"][0]
+    # 68 t weighed + one typical 34 t pass not weighed: one pass of 34 t left, not two
+    assert s["hint"]["kind"] == "last" and s["remaining_kg"] == pytest.approx(34000.0)
+    assert s["hint"]["text"] == ("Last pass: carry 34.0 t (at most 47.6 t), "
+                                 "counting the pass not weighed as 34.0 t")
+    assert s["warning"] == {"level": "warn", "text": "1 pass not weighed: the truck has at "
+                                                     "least 50.0 % of target"}
+    assert s["shift"]["not_weighed"] == 3  # the daemon's 2 and the open truck's 1
+    st.on_message("s1", "truck", {"truck": 9, "passes": 3, "total_kg": 68000.0,
+                                  "target_kg": 136000.0, "fill_pct": 50.0, "closed": True,
+                                  "status": "incomplete", "invalid_passes": 1})
+    s = st.snapshot()["shovels"][0]
+    assert s["closed"][0]["invalid_passes"] == 1 and s["closed"][0]["status"] == "incomplete"
+    assert s["warning"]["text"] == "Sent off with 1 pass not weighed: at least 50.0 % of target"
+    # a shovel with no weighed pass yet: the hint does not guess
+    hint = last_pass_hint(0.0, 136000.0, [], not_weighed=1)
+    assert hint["kind"] == "unknown" and hint["remaining_kg"] is None
+    assert hint["text"] == "1 pass not weighed: the truck's load is not known"
+    two = last_pass_hint(20000.0, 136000.0, [30000.0], not_weighed=2)
+    assert two["text"] == "2 passes left, about 28.0 t each, counting the passes not " \
+                          "weighed as 30.0 t each"

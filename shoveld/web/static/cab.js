@@ -44,7 +44,7 @@ function render(snap) {
   const tr = s.truck || {};
   $("truck-no").textContent = tr.truck ?? "-";
   $("truck-passes").textContent = tr.passes ?? 0;
-  $("truck-total").textContent = screen.t(tr.total_kg);
+  $("truck-total").textContent = screen.load(tr);
   $("truck-target").textContent = screen.t(tr.target_kg, 0);
   $("remaining").textContent = s.remaining_kg == null ? "-" :
     (s.remaining_kg > 0 ? screen.t(s.remaining_kg) : "over by " + screen.t(-s.remaining_kg));
@@ -68,12 +68,30 @@ function render(snap) {
   }).join("");
   $("doubt").textContent = s.doubt || "";
   $("trucks").innerHTML = s.closed.map(c =>
-    `<tr><td>${c.truck}</td><td>${c.passes}</td><td>${(c.total_kg / 1000).toFixed(1)}</td><td>${c.fill_pct} %</td><td>${screen.esc(c.status)}</td></tr>`).join("");
-  const r = s.rule;
-  $("shift").textContent = r ? `${screen.n(r.trucks, "truck", "trucks")}, mean ${r.mean_pct} % of target, ${r.over_110_pct} % over 110 %, ${r.over_120} over 120 % — ` +
-    (r.compliant ? "within the 10/10/20 rule" : "OUTSIDE the 10/10/20 rule") : "no truck closed yet";
+    `<tr><td>${c.truck}</td><td>${c.passes}</td><td>${c.invalid_passes ? "≥ " : ""}${(c.total_kg / 1000).toFixed(1)}</td><td>${c.fill_pct} %</td>${statusCell(c)}</tr>`).join("");
+  $("shift").textContent = ruleLine(s.rule);
   drawArm(s.joints);
   screen.fitProblems(probs, showProblems, screen.tapped());
+}
+
+// A closed truck's status: "?" for one with a pass not weighed (its load is known only
+// from below, "≥" in its tonnes), the whole in the cell's title; the panel has no room
+// for more beside the fill.
+function statusCell(c) {
+  if (c.status !== "incomplete") return `<td>${screen.esc(c.status)}</td>`;
+  const why = `${screen.n(c.invalid_passes, "pass", "passes")} not weighed: its load is not known`;
+  return `<td class="not-weighed" title="${screen.esc(why)}">?</td>`;
+}
+
+// The 10/10/20 line: a truck with a pass not weighed is not judged (its load is known
+// only from below), except over 120 % by its weighed passes alone: "4 of 5 trucks".
+function ruleLine(r) {
+  if (!r) return "no truck closed yet";
+  const all = r.trucks + (r.not_judged || 0);
+  if (!all) return "no truck closed yet";
+  const verdict = r.compliant ? "within the 10/10/20 rule" : "OUTSIDE the 10/10/20 rule";
+  if (!r.trucks) return `no truck judged of ${all}: a pass of each not weighed` + (r.over_120 ? `; ${r.over_120} over 120 % — ${verdict}` : "");
+  return `${r.not_judged ? r.trucks + " of " + all + " trucks" : screen.n(r.trucks, "truck", "trucks")}, mean ${r.mean_pct} % of target, ${r.over_110_pct} % over 110 %, ${r.over_120} over 120 % — ${verdict}`;
 }
 
 function showProblems(probs, whole) {

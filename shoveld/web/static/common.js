@@ -7,6 +7,9 @@ const screen = {
   t(kg, digits = 1) { return kg === null || kg === undefined ? "-" : (kg / 1000).toFixed(digits) + " t"; },
   // A count with its noun as a person writes it, "1 pass" / "2 passes" (as shoveld/words.py).
   n(k, one, many) { return `${k} ${k === 1 ? one : many}`; },
+  // A truck's load: its weighed total, "≥" before it when a pass of it was not weighed
+  // (the total is then a lower bound: shoveld/payload/trucks.py).
+  load(tr, digits = 1) { return (tr.invalid_passes ? "≥ " : "") + screen.t(tr.total_kg, digits); },
   esc(s) { return String(s ?? "").replace(/[&<>"]/g, c => ({"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;"}[c])); },
   connect(render) {
     const url = (location.protocol === "https:" ? "wss://" : "ws://") + location.host + "/ws";
