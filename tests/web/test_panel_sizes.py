@@ -11,7 +11,7 @@ from collections.abc import Iterator
 import pytest
 
 from shoveld.payload.trucks import Truck, rule_101020
-from shoveld.web.browser import open_browser
+from shoveld.web.browser import open_browser, tap
 from shoveld.web.server import ThreadedScreen
 from shoveld.web.state import ScreenState
 from tests.daemon.conftest import wait_for
@@ -169,8 +169,9 @@ def test_a_ten_inch_panel_shows_the_whole_cab_page_without_scrolling(
     """On the 10-inch panels (1280 x 800, 1024 x 600) the operator does not scroll with
     gloves on: the dipper, the truck, this truck's passes, the last trucks, the shift's
     10/10/20 line and the arm are all whole on the screen (at 800 x 480, a 7-inch panel,
-    only what is read at a glance is, as the test above holds)."""
-    b = open_browser(width, height)
+    only what is read at a glance is, as the test above holds). The panel is touch: the
+    taps are a finger's, through Chromium's touch input."""
+    b = open_browser(width, height, touch=True)
     try:
         b.get(full_screen.url)
         assert wait_for(lambda: b.find_element("id", "passes").text.count("\n") == 4, 10.0)
@@ -226,15 +227,16 @@ def test_a_ten_inch_panel_shows_the_whole_cab_page_without_scrolling(
         assert seen[0] == "object" and {"21", "22", "23", "24", "25"} <= set(seen[1]), seen
         # the panel is touch, where a title never shows: a tap shows the whole reason,
         # wrapped inside the panel, and a second tap the head again (the rows are drawn
-        # again at every snapshot, so each is found and tapped in one script)
-        cell = "document.querySelector('#passes tr.invalid-pass td.reason')"
-        b.execute_script(f"{cell}.click()")
+        # again at every snapshot: the tap is where the row stands, not on an element)
+        reason = "#passes tr.invalid-pass td.reason"
+        cell = f"document.querySelector('{reason}')"
+        tap(b, reason)
         assert wait_for(lambda: b.execute_script(f"return {cell}.textContent")
                         == "not weighed: " + NOT_WEIGHED, 3.0)
         wide = b.execute_script(f"return [{cell}.getBoundingClientRect().right,"
                                 " document.documentElement.scrollWidth]")
         assert wide[0] <= inner_w and wide[1] <= inner_w, (width, wide)
-        b.execute_script(f"{cell}.click()")
+        tap(b, reason)
         assert wait_for(lambda: b.execute_script(f"return {cell}.textContent").endswith(" …"),
                         3.0)
         assert b.find_element("id", "doubt").text == (
@@ -252,9 +254,9 @@ def test_a_ten_inch_panel_shows_the_whole_cab_page_without_scrolling(
         assert "empty dipper weighs +1.6 t" in text
         # the panel is touch: a tap shows the whole, a second tap the heads again
         strip = b.find_element("id", "health")
-        strip.click()
+        tap(b, "#health")
         assert wait_for(lambda: strip.text == " · ".join(said), 3.0), strip.text
-        strip.click()
+        tap(b, "#health")
         assert wait_for(lambda: (strip.text == " · ".join(said)) is whole, 3.0), strip.text
     finally:
         b.quit()
