@@ -104,7 +104,7 @@ def truck_warning(truck: dict[str, Any] | None) -> dict[str, str] | None:
         return {"level": "warn",
                 "text": (f"Sent off with {what} not weighed: at least {fill} % of target"
                          if truck.get("closed") else
-                         f"{what} not weighed: the truck has at least {fill} % of target")}
+                         f"{what} not weighed: at least {fill} % loaded")}
     if status == "under" and truck.get("closed"):
         return {"level": "warn", "text": f"Left under-loaded: {fill} % of target"}
     return None

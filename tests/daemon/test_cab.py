@@ -83,7 +83,7 @@ def test_a_truck_with_a_pass_not_weighed_is_at_least_its_weighed_total() -> None
     assert "still to go 34000 kg" in screen
     assert "Last pass: carry 34.0 t (at most 47.6 t), counting the pass not weighed as " \
            "34.0 t" in screen
-    assert "!! 1 pass not weighed: the truck has at least 50.0 % of target" in screen
+    assert "!! 1 pass not weighed: at least 50.0 % loaded" in screen
     state.on_message("s7", "truck", {
         "truck": 4, "passes": 3, "total_kg": 68000.0, "target_kg": 136000.0,
         "fill_pct": 50.0, "status": "incomplete", "invalid_passes": 1, "closed": True,

@@ -160,8 +160,7 @@ def test_a_pass_not_weighed_is_not_taken_for_an_empty_one() -> None:
     assert s["hint"]["kind"] == "last" and s["remaining_kg"] == pytest.approx(34000.0)
     assert s["hint"]["text"] == ("Last pass: carry 34.0 t (at most 47.6 t), "
                                  "counting the pass not weighed as 34.0 t")
-    assert s["warning"] == {"level": "warn", "text": "1 pass not weighed: the truck has at "
-                                                     "least 50.0 % of target"}
+    assert s["warning"] == {"level": "warn", "text": "1 pass not weighed: at least 50.0 % loaded"}
     assert s["shift"]["not_weighed"] == 3  # the daemon's 2 and the open truck's 1
     st.on_message("s1", "truck", {"truck": 9, "passes": 3, "total_kg": 68000.0,
                                   "target_kg": 136000.0, "fill_pct": 50.0, "closed": True,
