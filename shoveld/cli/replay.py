@@ -16,7 +16,6 @@ from typing import TYPE_CHECKING
 from shoveld.cli import CliError
 from shoveld.endpoints import endpoint_arg
 from shoveld.payload.misfit import misfit_note
-from shoveld.words import n_of
 
 if TYPE_CHECKING:
     from shoveld.daemon.config import DaemonConfig
@@ -133,6 +132,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         from drivers.capture.format import CaptureFormatError
         from shoveld.daemon.logs import setup_logging
+        from shoveld.payload.trucks import truck_line
         from shoveld.replay.service import fast_replay_service, replay_service
     finally:
         if collecting:
@@ -166,9 +166,7 @@ def run(args: argparse.Namespace) -> int:
                 note = misfit_note(m if isinstance(m, float) else None, cfg.engine.misfit_warn)
                 print(f"pass {msg['pass']:4d}  truck {msg['truck']:3d}  {val}{note}", flush=True)
             elif msg.get("closed"):
-                print(f"truck {msg['truck']:3d} closed: {n_of(msg['passes'], 'pass', 'passes')}, "
-                      f"{msg['total_kg']:.0f} kg of {msg['target_kg']:.0f} kg "
-                      f"({msg['fill_pct']} %), {msg['status']}", flush=True)
+                print(f"truck {msg['truck']:3d} closed: {truck_line(msg)}", flush=True)
 
         rr.service.on_event = on_event
         # a temporary pass log is removed below: syncing it to disk protects nothing

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 import threading
@@ -118,6 +119,24 @@ def test_replay_takes_the_capture_folders_own_params(tmp_path: Path) -> None:
                            str(tmp_path / "state")], capture_output=True, text=True,
                           check=True).stdout
     assert "truck    2: 1 pass, " in text and "truck    1: 2 passes, " in text  # not "1 passes"
+
+
+def test_replay_says_each_pass_and_truck_in_words(tmp_path: Path) -> None:
+    """Without --json: a line a pass, and a line a truck closed as the other commands say
+    a truck (``payload.trucks.truck_line``)."""
+    r = subprocess.run(
+        [sys.executable, "-m", "shoveld", "replay", str(CAPTURE), "--fast",
+         "--listen", f"tcp/127.0.0.1:{free_port()}"],
+        capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    lines = r.stdout.splitlines()
+    assert [ln.split()[1] for ln in lines if ln.startswith("pass ")] == ["1", "2", "3"]
+    closed = [ln for ln in lines if " closed: " in ln]
+    assert len(closed) == 2, r.stdout
+    assert re.fullmatch(r"truck   1 closed: 2 passes, \d+ kg of 136000 kg \(\d+\.\d %\), under",
+                        closed[0]), closed
+    assert closed[1].startswith("truck   2 closed: 1 pass, "), closed
+    assert re.search(r"replayed 103\.\d s of capture", r.stderr), r.stderr
 
 
 @pytest.mark.parametrize("speed", ["0", "-2", "nan", "fast"])
