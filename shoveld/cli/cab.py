@@ -177,11 +177,13 @@ class CabState:
                     if v.truck and v.truck.get("truck") != msg.get("truck"):
                         v.passes = [p for p in v.passes if p.get("truck") == msg.get("truck")]
                     v.truck = msg
+                nw = int(msg.get("invalid_passes") or 0)
                 self.lines.append(
                     f"{time.strftime('%H:%M:%S')} {shovel} truck {msg.get('truck')}"
                     f"{' CLOSED' if msg.get('closed') else ''}: "
-                    f"{n_of(msg.get('passes'), 'pass', 'passes')}, "
-                    f"{msg.get('total_kg', 0):.0f} of {msg.get('target_kg', 0):.0f} kg "
+                    f"{n_of(msg.get('passes'), 'pass', 'passes')}"
+                    + (f" ({nw} not weighed), at least " if nw else ", ")
+                    + f"{msg.get('total_kg', 0):.0f} of {msg.get('target_kg', 0):.0f} kg "
                     f"({msg.get('fill_pct')} %) {_truck_word(msg)}")
             elif topic == "health":
                 probs = list(msg.get("problems") or [])

@@ -247,15 +247,14 @@ def _start_page(args: argparse.Namespace, shovel: str) -> tuple[Any, Any]:
 
 
 def _summary(state: Any, service: Any, out: Any) -> None:
+    from shoveld.payload.trucks import truck_line
+
     if not out.isatty():
         pass
     lines = ["", "demo finished."]
     for v in state.shovels.values():
         for c in v.closed:
-            n = c["passes"]
-            lines.append(f"  truck {c['truck']}: {n_of(n, 'pass', 'passes')}, "
-                         f"{c['total_kg']:.0f} kg "
-                         f"of {c['target_kg']:.0f} kg ({c['fill_pct']} %), {c['status']}")
+            lines.append(f"  truck {c['truck']}: {truck_line(c)}")
     st = service.loop_stats.as_dict(service.cfg.loop.rate_hz)
     j = st.get("jitter_ms") or {}
     lines.append(f"  loop: {n_of(st['ticks'], 'tick', 'ticks')}, "

@@ -84,6 +84,8 @@ def test_a_truck_with_a_pass_not_weighed_is_at_least_its_weighed_total() -> None
     assert "Last pass: carry 34.0 t (at most 47.6 t), counting the pass not weighed as " \
            "34.0 t" in screen
     assert "!! 1 pass not weighed: at least 50.0 % loaded" in screen
+    assert state.take_lines()[-1].endswith(
+        "s7 truck 4: 3 passes (1 not weighed), at least 68000 of 136000 kg (50.0 %) loading")
     state.on_message("s7", "truck", {
         "truck": 4, "passes": 3, "total_kg": 68000.0, "target_kg": 136000.0,
         "fill_pct": 50.0, "status": "incomplete", "invalid_passes": 1, "closed": True,
