@@ -111,6 +111,13 @@ def _doubt(p: dict[str, Any]) -> str:
         "  ? model did not fit"
 
 
+def _live_doubt(live: dict[str, Any]) -> str:
+    """A live estimate made while the crowd is in doubt (the daemon's ``crowd_doubt``:
+    its laser's gap or change of target) says so beside its number ("" otherwise)."""
+    d = live.get("crowd_doubt")
+    return f"  ? crowd laser {d}: checked at the dump" if d else ""
+
+
 def _kg(x: Any) -> str:
     return "     --" if x is None else f"{x:7.0f}"
 
@@ -157,6 +164,7 @@ class CabState:
                 if self._last_phase.get(shovel) != ph:
                     self._last_phase[shovel] = ph
                     val = (f"{msg['payload_kg']:.0f} kg +- {msg['std_kg']:.0f} kg"
+                           f"{_live_doubt(msg)}"
                            if msg.get("valid") and msg.get("payload_kg") is not None
                            else "no valid estimate")
                     self.lines.append(f"{stamp} {shovel} {ph:7s} live {val}")
@@ -243,7 +251,7 @@ class CabState:
                            + "=" * max(0, width - len(name) - 4 - (0 if v.alive else 18)))
                 lv = v.live or {}
                 if lv.get("valid") and lv.get("payload_kg") is not None:
-                    val = f"{lv['payload_kg']:8.0f} kg  +- {lv['std_kg']:.0f} kg"
+                    val = f"{lv['payload_kg']:8.0f} kg  +- {lv['std_kg']:.0f} kg{_live_doubt(lv)}"
                 else:
                     val = "      -- (no valid estimate)"
                 out.append(f"  phase {lv.get('phase', '?'):7s}  live payload {val}")

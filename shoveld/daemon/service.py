@@ -144,7 +144,9 @@ class Service:
         self._prev_overruns = 0
         self._prev_ticks = 0
         # snapshots for the status query (replaced whole, read from Zenoh's thread)
-        self._live: tuple[LiveEstimate, int, int] | None = None
+        self._live: tuple[LiveEstimate, int, int, str | None] | None = None
+        """The newest live estimate, its pass and truck, and what put the crowd in doubt
+        (:class:`~shoveld.engine.loop.CrowdDoubt`) then, if it was."""
         self._live_built: tuple[Any, dict[str, Any]] | None = None
         self.truck_msg: dict[str, Any] | None = None
         self.truck_passes: list[dict[str, Any]] = []
@@ -197,12 +199,13 @@ class Service:
         built = self._live_built
         if built is not None and built[0] is live:
             return built[1]
-        ev, pass_index, truck_index = live
+        ev, pass_index, truck_index, doubt = live
         valid = bool(ev.valid and math.isfinite(ev.payload_kg))
         msg = {"time": round(self.clock.wall(ev.time_s), 3),
                "payload_kg": _r(ev.payload_kg, 1) if valid else None,
                "std_kg": _r(ev.std_kg, 1) if valid else None,
-               "phase": ev.phase, "valid": valid, "pass": pass_index, "truck": truck_index}
+               "phase": ev.phase, "valid": valid, "pass": pass_index, "truck": truck_index,
+               "crowd_doubt": doubt}
         self._live_built = (live, msg)
         return msg
 
@@ -211,7 +214,7 @@ class Service:
         live = self._live
         if live is None:
             return None
-        ev, pass_index, truck_index = live
+        ev, pass_index, truck_index, doubt = live
         if ev.valid and math.isfinite(ev.payload_kg):
             numbers = f'"payload_kg":{_jr(ev.payload_kg, 1)},"std_kg":{_jr(ev.std_kg, 1)}'
             valid = "true"
@@ -219,7 +222,8 @@ class Service:
             numbers, valid = '"payload_kg":null,"std_kg":null', "false"
         return (f'{{"time":{_jr(self.clock.wall(ev.time_s), 3)},{numbers},'
                 f'"phase":{_json_str(ev.phase)},"valid":{valid},"pass":{int(pass_index)},'
-                f'"truck":{int(truck_index)}}}')
+                f'"truck":{int(truck_index)},'
+                f'"crowd_doubt":{"null" if doubt is None else _json_str(doubt)}}}')
 
     # -- lifecycle ---------------------------------------------------------------------------
     def _health_of(self, name: str) -> Any:
@@ -342,7 +346,9 @@ class Service:
                 self._published(True)
         for ev in engine.step(s):
             if ev.__class__ is LiveEstimate:  # one every tick: kept here, not in _event
-                self._live = (ev, engine.pass_index, engine.truck.index)
+                d = engine.crowd_doubt
+                self._live = (ev, engine.pass_index, engine.truck.index,
+                              None if d is None else d.what)
             else:
                 self._event(ev, t)
         if k % self._live_every == 0 and self._live is not None:
@@ -395,7 +401,9 @@ class Service:
         engine = self.engine
         assert engine is not None
         if isinstance(ev, LiveEstimate):
-            self._live = (ev, engine.pass_index, engine.truck.index)
+            d = engine.crowd_doubt
+            self._live = (ev, engine.pass_index, engine.truck.index,
+                          None if d is None else d.what)
         elif isinstance(ev, PassResult):
             stamp = self._boot_stamp
             self._q.put(("pass", ev.as_dict(), wall(ev.start_s), wall(ev.end_s),

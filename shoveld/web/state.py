@@ -236,6 +236,9 @@ class ScreenState(CabState):
             "payload_kg": live.get("payload_kg") if valid else None,
             "std_kg": live.get("std_kg") if valid else None,
             "valid": valid,
+            # the crowd in doubt since its laser's gap (or change of target): the pass
+            # under way is judged at its end, so the number shown now is marked
+            "crowd_doubt": live.get("crowd_doubt") if valid else None,
             "truck": truck or None,
             "remaining_kg": hint.get("remaining_kg") if hint else
                             (target - total) if target else None,

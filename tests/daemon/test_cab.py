@@ -58,6 +58,14 @@ def test_screen_shows_live_passes_truck_and_problems() -> None:
     state.on_message("s7", "payload/live", {"time": T, "payload_kg": None, "std_kg": None,
                                             "phase": "dump", "valid": False})
     assert "no valid estimate" in state.screen()
+    # a live estimate made while the crowd is in doubt is marked beside its number
+    state.on_message("s7", "payload/live", {"time": T, "payload_kg": 30500.0, "std_kg": 400.0,
+                                            "phase": "lift", "valid": True,
+                                            "crowd_doubt": "had no reading for 1.0 s"})
+    assert ("live payload    30500 kg  +- 400 kg  ? crowd laser had no reading for 1.0 s: "
+            "checked at the dump") in state.screen()
+    assert state.take_lines()[-1].endswith("lift    live 30500 kg +- 400 kg  ? crowd laser "
+                                           "had no reading for 1.0 s: checked at the dump")
 
 
 def test_a_truck_with_a_pass_not_weighed_is_at_least_its_weighed_total() -> None:

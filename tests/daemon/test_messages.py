@@ -52,5 +52,7 @@ def test_live_text_is_dumps_of_the_live_message() -> None:
         ev = SimpleNamespace(time_s=rng.uniform(0, 1e5), payload_kg=value(rng),
                              std_kg=value(rng), valid=rng.random() < 0.7,
                              phase=rng.choice(["dig", "swing_loaded", "dump", 'x"y']))
-        svc._live = (ev, rng.randrange(1, 500), rng.randrange(1, 100))  # type: ignore[assignment]
+        doubt = rng.choice([None, "had no reading for 1.0 s", "took another target", 'q"\u00e9'])
+        svc._live = (ev, rng.randrange(1, 500), rng.randrange(1, 100),  # type: ignore[assignment]
+                     doubt)
         assert svc.live_json() == dumps(svc.live_msg)

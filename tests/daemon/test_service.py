@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 import threading
 import time
 from pathlib import Path
@@ -311,13 +312,23 @@ def swinging_table(machine_and_params: tuple[Machine, ModelParams]) -> SignalsTa
 
 
 def run_to_the_end(table: SignalsTable, cfg: Any, params: ModelParams,
-                   faults: list[Fault] | None = None
+                   faults: list[Fault] | None = None, live: list[dict[str, Any]] | None = None
                    ) -> tuple[list[dict[str, Any]], dict[str, Any], dict[str, Any]]:
     """The whole table through the service on a simulated clock: its pass messages, then
-    the health it publishes and the status it answers at the end."""
+    the health it publishes and the status it answers at the end; into ``live``, the
+    ``payload/live`` messages it writes (as a subscriber would get them)."""
     got: list[dict[str, Any]] = []
     svc, feed = table_service(table, cfg, params, close_truck_at_end=True, faults=faults)
     svc.on_event = lambda k, m: got.append({"topic": k, **m})
+    if live is not None:
+        put_text = svc.publisher.put_text
+
+        def keep(topic: str, make: Any) -> bool:
+            if topic == "payload/live":
+                live.append(json.loads(make()))
+            return put_text(topic, make)
+
+        svc.publisher.put_text = keep  # type: ignore[method-assign]
     svc.start()
     try:
         svc.run(threading.Event(), done=lambda: feed.finished)
@@ -418,8 +429,9 @@ def test_passes_on_something_the_laser_took_for_the_handle_in_an_outage_are_not_
     cfg = make_cfg(tmp_path)
     clean, _, _ = run_to_the_end(res.table, cfg, params)
     cfg = make_cfg(tmp_path / "lost")
+    live: list[dict[str, Any]] = []
     passes, health, status = run_to_the_end(
-        lost, cfg, params, [Fault("laser", cut - t0, cut - t0 + 1.0, "disconnected")])
+        lost, cfg, params, [Fault("laser", cut - t0, cut - t0 + 1.0, "disconnected")], live)
     assert [m["pass"] for m in passes] == [m["pass"] for m in clean] == [1, 2, 3, 4, 5]
     assert [m["payload_kg"] for m in passes[:2]] == [m["payload_kg"] for m in clean[:2]]
     assert all(m["valid"] for m in clean)
@@ -440,6 +452,14 @@ def test_passes_on_something_the_laser_took_for_the_handle_in_an_outage_are_not_
 
     ok = {"crowd_doubt": {**doubt, "refusing": 0}}
     assert problems({}, ok, {"open": True}, {}) == []
+    # the live estimate says the crowd is in doubt from the gap on, so that the cab marks
+    # the number it shows before the dump (the pass is judged only at its end); before
+    # the gap it says nothing
+    said = {n: {m["crowd_doubt"] for m in live if m["valid"] and m["pass"] == n}
+            for n in range(1, 6)}
+    assert said[1] == said[2] == {None}
+    assert "had no reading for 1.0 s" in said[3]  # the gap came in its lift
+    assert said[4] == said[5] == {"had no reading for 1.0 s"}
 
 
 def test_a_calibration_whose_verified_passes_fit_worse_is_a_problem_health_names(

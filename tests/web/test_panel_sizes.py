@@ -26,17 +26,21 @@ def head(problem: str) -> str:
     return problem if len(parts) < 3 else ": ".join(parts[:2]) + " …"
 
 
-def served(st: ScreenState, shovels: list[str]) -> Iterator[ThreadedScreen]:
+def served(st: ScreenState, shovels: list[str],
+           doubt: dict[str, str] | None = None) -> Iterator[ThreadedScreen]:
     """The pages of ``st``, each shovel heard from every half second with a live payload
-    of 31.2 t in the swing (a screen with nothing new marks a shovel silent)."""
+    of 31.2 t in the swing (a screen with nothing new marks a shovel silent); ``doubt``:
+    the shovels whose crowd is in doubt, and why."""
     stop = threading.Event()
+    doubt = doubt or {}
 
     def feed() -> None:
         while not stop.is_set():
             for sid in shovels:
                 st.on_alive(sid, True)
                 st.on_message(sid, "payload/live", {"payload_kg": 31234.0, "std_kg": 120.0,
-                                                    "valid": True, "phase": "swing"})
+                                                    "valid": True, "phase": "swing",
+                                                    "crowd_doubt": doubt.get(sid)})
             stop.wait(0.5)
 
     feeder = threading.Thread(target=feed, daemon=True)
@@ -62,6 +66,53 @@ def screen() -> Iterator[ThreadedScreen]:
         st.on_message("s1", "pass", {"pass": i + 1, "truck": 4, "payload_kg": 31000.0,
                                      "std_kg": 110.0, "valid": True, "end": time.time()})
     yield from served(st, ["s1"])
+
+
+@pytest.fixture(scope="module")
+def in_doubt() -> Iterator[ThreadedScreen]:
+    """The shovel of :func:`screen`, its crowd in doubt: its laser had a gap in this pass."""
+    st = ScreenState()
+    st.set_link("up", "test")
+    st.on_alive("s1", True)
+    st.on_message("s1", "truck", {"truck": 4, "passes": 3, "total_kg": 93000.0,
+                                  "target_kg": 136000.0, "fill_pct": 68.4, "status": "under"})
+    for i in range(3):
+        st.on_message("s1", "pass", {"pass": i + 1, "truck": 4, "payload_kg": 31000.0,
+                                     "std_kg": 110.0, "valid": True, "end": time.time()})
+    yield from served(st, ["s1"], {"s1": "had no reading for 1.0 s"})
+
+
+@pytest.mark.parametrize(("width", "height"), [(1280, 800), (1024, 600), (800, 480)])
+def test_a_number_made_while_the_crowd_is_in_doubt_is_marked(
+        in_doubt: ThreadedScreen, width: int, height: int) -> None:
+    """The live number the operator reads before the dump, made while the crowd laser is
+    in doubt (the pass is judged only at its end): in the warning's colour, with a line
+    under it that says why, and what is read at a glance still on the first screen at
+    every panel size."""
+    b = open_browser(width, height)
+    try:
+        b.get(in_doubt.url)
+        assert wait_for(lambda: b.find_element("id", "payload-doubt").text != "", 10.0)
+        assert b.find_element("id", "payload").text == "31.2 t"
+        said = b.execute_script(
+            "const d = document.getElementById('payload-doubt'), r = d.getBoundingClientRect();"
+            "return [d.title, r.left, r.right, r.bottom, r.height,"
+            " getComputedStyle(document.getElementById('payload')).color,"
+            " getComputedStyle(d).color, document.documentElement.scrollWidth, innerWidth,"
+            " innerHeight]")
+        title, left, right, bottom, h, color, doubt_color, scroll_w, inner_w, inner_h = said
+        assert title == "? crowd laser had no reading for 1.0 s: checked at the dump"
+        assert 0 <= left and right <= inner_w and bottom <= inner_h and 0 < h < 40, said
+        assert color == doubt_color != "rgb(0, 0, 0)", said  # the warning's colour
+        assert scroll_w <= inner_w, said
+        for element_id in AT_A_GLANCE:
+            box = b.execute_script(
+                "const r = document.getElementById(arguments[0]).getBoundingClientRect();"
+                "return [r.left, r.top, r.right, r.bottom]", element_id)
+            assert box[3] > box[1] and 0 <= box[0] and box[2] <= inner_w and box[3] <= inner_h, \
+                (width, height, element_id, box)
+    finally:
+        b.quit()
 
 
 @pytest.mark.parametrize(("width", "height"), [(1280, 800), (1024, 600), (800, 480)])
@@ -267,7 +318,7 @@ def fleet() -> Iterator[ThreadedScreen]:
     """Six shovels in the middle of their trucks, each heard every half second; the last
     with two passes this shift the model did not fit and the three payload problems health
     can name, the longest a card shows; the fifth with three passes not weighed this
-    shift, one of them in its truck."""
+    shift, one of them in its truck; the fourth's crowd in doubt."""
     st = ScreenState()
     st.set_link("up", "test")
     ids = [f"shovel-{k:02d}" for k in range(1, 7)]
@@ -296,7 +347,7 @@ def fleet() -> Iterator[ThreadedScreen]:
         "3.6 times): above 1.5, the model lacks something this machine does in "
         "operation (a swing, a slope), which the misfit will not mark; shoveld "
         "diagnose names it"]})
-    yield from served(st, ids)
+    yield from served(st, ids, {ids[3]: "had no reading for 1.0 s"})
 
 
 @pytest.mark.parametrize(("width", "height"), [(1920, 1080), (1366, 768), (1024, 768)])
@@ -328,6 +379,8 @@ def test_the_office_sees_a_fleet_of_six_on_one_screen(fleet: ThreadedScreen, wid
         assert [("2 passes the model did not fit" in t) for t in texts] == [False] * 5 + [True]
         # passes not weighed: the truck's and the shift's tonnes are "at least", and the
         # card says how many
+        assert [("? crowd laser in doubt" in t) for t in texts] == [False] * 3 + [True] \
+            + [False] * 2
         assert "truck 15: ≥ 93.0 t of 136 t, 4 passes, 1 not weighed" in texts[4], texts[4]
         assert "this shift: 52 passes, ≥ 1553.0 t in 12 trucks; 3 not weighed" in texts[4]
         assert [("not weighed" in t or "≥" in t) for t in texts] == [False] * 4 + [True, False]

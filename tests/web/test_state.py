@@ -175,3 +175,25 @@ def test_a_pass_not_weighed_is_not_taken_for_an_empty_one() -> None:
     two = last_pass_hint(20000.0, 136000.0, [30000.0], not_weighed=2)
     assert two["text"] == "2 passes left, about 28.0 t each, counting the passes not " \
                           "weighed as 30.0 t each"
+
+
+def test_the_live_number_carries_the_crowds_doubt_while_it_is_a_number() -> None:
+    """The daemon's ``crowd_doubt`` on a live estimate reaches the pages with the number;
+    with no number (not valid, or the shovel silent) there is nothing to mark."""
+    st = ScreenState()
+    st.on_alive("s1", True)
+    st.on_message("s1", "payload/live", {"payload_kg": 30500.0, "std_kg": 300.0,
+                                         "valid": True, "phase": "lift",
+                                         "crowd_doubt": "had no reading for 1.0 s"})
+    heard = st.heard["s1"]
+    s = st.snapshot(now=heard + 0.5)["shovels"][0]
+    assert s["valid"] and s["crowd_doubt"] == "had no reading for 1.0 s"
+    assert st.snapshot(now=heard + SILENT_AFTER_S + 1.0)["shovels"][0]["crowd_doubt"] is None
+    st.on_message("s1", "payload/live", {"payload_kg": None, "std_kg": None, "valid": False,
+                                         "phase": "dump",
+                                         "crowd_doubt": "had no reading for 1.0 s"})
+    assert st.snapshot()["shovels"][0]["crowd_doubt"] is None
+    # a daemon older than the field sends none: nothing is marked
+    st.on_message("s1", "payload/live", {"payload_kg": 30500.0, "std_kg": 300.0,
+                                         "valid": True, "phase": "swing"})
+    assert st.snapshot()["shovels"][0]["crowd_doubt"] is None

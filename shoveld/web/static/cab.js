@@ -31,14 +31,21 @@ function render(snap) {
   if (!s) return;
   $("shovel").textContent = s.shovel;
   const p = $("payload");
+  const d = $("payload-doubt");
   if (s.valid && screen.socketUp) {
+    // a crowd in doubt (its laser had a gap): the number in the warning's colour and a
+    // line under it ("?" there: the number's own line has no room for it at 800 px);
+    // the pass is weighed at the dump only if it fits the machine
     p.textContent = (s.payload_kg / 1000).toFixed(1) + " t";
-    p.className = "";
+    p.className = s.crowd_doubt ? "doubtful" : "";
     $("payload-std").textContent = "± " + (s.std_kg / 1000).toFixed(1) + " t";
+    d.textContent = s.crowd_doubt ? `? crowd laser ${s.crowd_doubt}: checked at the dump` : "";
+    d.title = d.textContent;
   } else {
     p.textContent = "no valid estimate";
     p.className = "invalid";
     $("payload-std").textContent = "";
+    d.textContent = d.title = "";
   }
   $("phase").textContent = s.phase ? s.phase.toUpperCase() : "";
   const tr = s.truck || {};

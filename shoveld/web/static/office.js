@@ -5,9 +5,10 @@ function card(s, whole) {
   const state = s.silent ? `<span class="silent-tag">SILENT${s.age_s != null ? " for " + s.age_s.toFixed(0) + " s" : ""}</span>`
     : `<span class="state">${screen.esc((s.phase || "idle").toUpperCase())}</span>`;
   const live = s.valid ? screen.t(s.payload_kg) + " ± " + screen.t(s.std_kg) : "no valid estimate";
+  const doubt = s.crowd_doubt ? ` <span class="doubtful" title="the crowd laser ${screen.esc(s.crowd_doubt)}">? crowd laser in doubt</span>` : "";
   return `<section class="panel card${s.silent ? " silent" : ""}" data-shovel="${screen.esc(s.shovel)}">
     <h2>${screen.esc(s.shovel)} ${state}</h2>
-    <div>live payload: <b class="live">${live}</b></div>
+    <div>live payload: <b class="live">${live}</b>${doubt}</div>
     <div>truck ${tr.truck ?? "-"}: <b class="truck">${screen.load(tr)}</b> of ${screen.t(tr.target_kg, 0)}, ${screen.n(tr.passes ?? 0, "pass", "passes")}${tr.invalid_passes ? `, <span class="doubtful not-weighed">${tr.invalid_passes} not weighed</span>` : ""}</div>
     <div>this shift: <b class="shift">${screen.n(s.shift.passes, "pass", "passes")}, ${s.shift.not_weighed ? "≥ " : ""}${screen.t(s.shift.kg)}</b> in ${screen.n(s.shift.trucks, "truck", "trucks")}${s.shift.not_weighed ? `; <span class="doubtful not-weighed">${s.shift.not_weighed} not weighed</span>` : ""}${s.shift.misfit_high ? `; <span class="doubtful">${screen.n(s.shift.misfit_high, "pass", "passes")} the model did not fit</span>` : ""}</div>
     <div class="problems">${s.problems.map(p => `<div title="${screen.esc(p)}">${screen.esc(screen.clipped(p, whole))}</div>`).join("")}</div>
