@@ -41,13 +41,13 @@ def last_pass_hint(total_kg: float, target_kg: float, recent_kg: list[float],
     known = math.isfinite(typical) and typical > 0.0
     note = ""
     if not_weighed:
+        if total_kg >= target_kg:  # full by the weighed passes alone: nothing to count
+            return {"kind": "full", "text": "Truck full: send it",
+                    "remaining_kg": target_kg - total_kg, "passes_left": 0}
         if not known:
             return {"kind": "unknown", "remaining_kg": None, "passes_left": None,
                     "text": f"{n_of(not_weighed, 'pass', 'passes')} not weighed: "
                             "the truck's load is not known"}
-        if total_kg >= target_kg:  # full by the weighed passes alone: nothing to count
-            return {"kind": "full", "text": "Truck full: send it",
-                    "remaining_kg": target_kg - total_kg, "passes_left": 0}
         total_kg += not_weighed * typical
         note = (f", counting the {'pass' if not_weighed == 1 else 'passes'} not weighed "
                 f"as {typical / 1000:.1f} t" + (" each" if not_weighed > 1 else ""))

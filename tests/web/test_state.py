@@ -172,6 +172,9 @@ def test_a_pass_not_weighed_is_not_taken_for_an_empty_one() -> None:
     hint = last_pass_hint(0.0, 136000.0, [], not_weighed=1)
     assert hint["kind"] == "unknown" and hint["remaining_kg"] is None
     assert hint["text"] == "1 pass not weighed: the truck's load is not known"
+    # full by its weighed passes alone: full, whatever the pass not weighed carried
+    full = last_pass_hint(140000.0, 136000.0, [], not_weighed=1)
+    assert full["kind"] == "full" and full["remaining_kg"] == -4000.0
     two = last_pass_hint(20000.0, 136000.0, [30000.0], not_weighed=2)
     assert two["text"] == "2 passes left, about 28.0 t each, counting the passes not " \
                           "weighed as 30.0 t each"
