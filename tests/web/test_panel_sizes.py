@@ -135,6 +135,10 @@ def test_what_the_operator_reads_is_on_the_first_screen(screen: ThreadedScreen, 
             assert bottom > top and 0 <= left and right <= inner_w and bottom <= inner_h, \
                 (width, height, element_id, box)
         assert b.find_element("id", "remaining").text == "43.0 t"
+        # a crowd not in doubt: no mark on the number
+        assert b.execute_script("return [document.getElementById('payload').className,"
+                                " document.getElementById('payload-doubt').textContent]"
+                                ) == ["", ""]
         # the dipper's number is the largest on the screen at every size
         sizes = b.execute_script(
             "return Array.from(document.querySelectorAll('body *')).map("
