@@ -54,9 +54,8 @@ def served(st: ScreenState, shovels: list[str],
         page.close()
 
 
-@pytest.fixture(scope="module")
-def screen() -> Iterator[ThreadedScreen]:
-    """A shovel in the middle of a truck, kept alive by a message every half second."""
+def mid_truck() -> ScreenState:
+    """Shovel s1 in the middle of a truck: three passes of 31 t, 43 t to go."""
     st = ScreenState()
     st.set_link("up", "test")
     st.on_alive("s1", True)
@@ -65,21 +64,19 @@ def screen() -> Iterator[ThreadedScreen]:
     for i in range(3):
         st.on_message("s1", "pass", {"pass": i + 1, "truck": 4, "payload_kg": 31000.0,
                                      "std_kg": 110.0, "valid": True, "end": time.time()})
-    yield from served(st, ["s1"])
+    return st
+
+
+@pytest.fixture(scope="module")
+def screen() -> Iterator[ThreadedScreen]:
+    """A shovel in the middle of a truck, kept alive by a message every half second."""
+    yield from served(mid_truck(), ["s1"])
 
 
 @pytest.fixture(scope="module")
 def in_doubt() -> Iterator[ThreadedScreen]:
     """The shovel of :func:`screen`, its crowd in doubt: its laser had a gap in this pass."""
-    st = ScreenState()
-    st.set_link("up", "test")
-    st.on_alive("s1", True)
-    st.on_message("s1", "truck", {"truck": 4, "passes": 3, "total_kg": 93000.0,
-                                  "target_kg": 136000.0, "fill_pct": 68.4, "status": "under"})
-    for i in range(3):
-        st.on_message("s1", "pass", {"pass": i + 1, "truck": 4, "payload_kg": 31000.0,
-                                     "std_kg": 110.0, "valid": True, "end": time.time()})
-    yield from served(st, ["s1"], {"s1": "had no reading for 1.0 s"})
+    yield from served(mid_truck(), ["s1"], {"s1": "had no reading for 1.0 s"})
 
 
 @pytest.mark.parametrize(("width", "height"), [(1280, 800), (1024, 600), (800, 480)])
