@@ -118,6 +118,15 @@ def _live_doubt(live: dict[str, Any]) -> str:
     return f"  ? crowd laser {d}: checked at the dump" if d else ""
 
 
+def _load(t: dict[str, Any]) -> str:
+    """A truck message's passes and load: "3 passes, 68000 of 136000 kg", and with a pass
+    not weighed "3 passes (1 not weighed), at least 68000 of 136000 kg"."""
+    nw = int(t.get("invalid_passes") or 0)
+    return (n_of(t.get("passes") or 0, "pass", "passes")
+            + (f" ({nw} not weighed), at least " if nw else ", ")
+            + f"{t.get('total_kg') or 0:.0f} of {t.get('target_kg') or 0:.0f} kg")
+
+
 def _kg(x: Any) -> str:
     return "     --" if x is None else f"{x:7.0f}"
 
@@ -185,13 +194,9 @@ class CabState:
                     if v.truck and v.truck.get("truck") != msg.get("truck"):
                         v.passes = [p for p in v.passes if p.get("truck") == msg.get("truck")]
                     v.truck = msg
-                nw = int(msg.get("invalid_passes") or 0)
                 self.lines.append(
                     f"{time.strftime('%H:%M:%S')} {shovel} truck {msg.get('truck')}"
-                    f"{' CLOSED' if msg.get('closed') else ''}: "
-                    f"{n_of(msg.get('passes'), 'pass', 'passes')}"
-                    + (f" ({nw} not weighed), at least " if nw else ", ")
-                    + f"{msg.get('total_kg', 0):.0f} of {msg.get('target_kg', 0):.0f} kg "
+                    f"{' CLOSED' if msg.get('closed') else ''}: {_load(msg)} "
                     f"({msg.get('fill_pct')} %) {_truck_word(msg)}")
             elif topic == "health":
                 probs = list(msg.get("problems") or [])
@@ -260,15 +265,13 @@ class CabState:
                     t = dict(v.closed[-1])
                 target = float(t.get("target_kg") or 0.0)
                 total = float(t.get("total_kg") or 0.0)
-                n = int(t.get("passes") or 0)
                 nw = int(t.get("invalid_passes") or 0)
                 status = str(t.get("status") or "")
                 # A truck being loaded is not "under" yet: say so only once it is sent off.
                 word = ("sent off, " + status.upper() if t.get("closed") else
                         "OVER" if status.startswith("over") else "loading")
-                out.append(f"  truck {t.get('truck', '?')}: {n_of(n, 'pass', 'passes')}"
-                           + (f" ({nw} not weighed), at least " if nw else ", ")
-                           + f"{total:.0f} of {target:.0f} kg ({t.get('fill_pct', 0)} %)  {word}")
+                out.append(f"  truck {t.get('truck', '?')}: {_load(t)} "
+                           f"({t.get('fill_pct', 0)} %)  {word}")
                 if target and not t.get("closed"):
                     recent = [float(p["payload_kg"]) for p in v.passes[-10:]
                               if p.get("valid") and p.get("payload_kg") is not None]
