@@ -145,6 +145,13 @@ def test_what_the_fast_parser_would_take_is_still_refused(tmp_path: Path, bad: s
         read_table("t.csv", "\n".join(lines) + "\n")
 
 
+def test_every_columns_range_is_finite() -> None:
+    """The fast path refuses infinities by the columns' ranges alone."""
+    from shoveld.signals.columns import COLUMNS
+
+    assert all(np.isfinite([c.lo, c.hi]).all() for c in COLUMNS)
+
+
 def test_samples_come_out_row_by_row_across_chunks() -> None:
     """The rows become Python floats a chunk at a time (memory); every row comes out once,
     in order, across the chunk edges, NaN (an unknown cell) included."""
