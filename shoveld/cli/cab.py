@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 from shoveld.cli import CliError
 from shoveld.endpoints import endpoint_arg
+from shoveld.payload.trucks import passes_words
 from shoveld.words import n_of
 
 if TYPE_CHECKING:
@@ -121,10 +122,8 @@ def _live_doubt(live: dict[str, Any]) -> str:
 def _load(t: dict[str, Any]) -> str:
     """A truck message's passes and load: "3 passes, 68000 of 136000 kg", and with a pass
     not weighed "3 passes (1 not weighed), at least 68000 of 136000 kg"."""
-    nw = int(t.get("invalid_passes") or 0)
-    return (n_of(t.get("passes") or 0, "pass", "passes")
-            + (f" ({nw} not weighed), at least " if nw else ", ")
-            + f"{t.get('total_kg') or 0:.0f} of {t.get('target_kg') or 0:.0f} kg")
+    passes, least = passes_words(t)
+    return f"{passes}, {least}{t.get('total_kg') or 0:.0f} of {t.get('target_kg') or 0:.0f} kg"
 
 
 def _kg(x: Any) -> str:

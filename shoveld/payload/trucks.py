@@ -108,11 +108,17 @@ def rule_summary(rule: dict[str, Any], closed: bool = True) -> str:
             + f" -> {verdict}")
 
 
+def passes_words(d: dict[str, Any]) -> tuple[str, str]:
+    """A truck message's passes in words, "3 passes (1 not weighed)", and what goes before
+    its total: "at least " with a pass not weighed (the total is a lower bound), else ""."""
+    n = int(d.get("invalid_passes") or 0)
+    return (n_of(d.get("passes") or 0, "pass", "passes") + (f" ({n} not weighed)" if n else ""),
+            "at least " if n else "")
+
+
 def truck_line(d: dict[str, Any]) -> str:
     """A truck of :meth:`Truck.as_dict` in words: "4 passes, 87300 kg of 240000 kg (36.4
     %), ok"; with a pass not weighed its total is "at least" and the count says so."""
-    n = int(d.get("invalid_passes") or 0)
-    passes = n_of(d["passes"], "pass", "passes") + (f" ({n} not weighed)" if n else "")
-    least = "at least " if n else ""
+    passes, least = passes_words(d)
     return (f"{passes}, {least}{d['total_kg']:.0f} kg of {d['target_kg']:.0f} kg "
             f"({d['fill_pct']:.1f} %), {d['status']}")
