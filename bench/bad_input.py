@@ -147,6 +147,38 @@ def cases(f: dict[str, Path]) -> list[tuple[str, str, list[str]]]:
         ("pki", "bad-role", ["pki", "issue", "x", "--role", "boss", "--dir", s(f["nodir"])]),
         ("diagnose", "unknown-term", ["diagnose", "--calib", s(f["table-garbled"]),
                                       "--measured", s(f["table-garbled"]), "--library", "x"]),
+        ("replay", "not-a-folder", ["replay", s(f["table-garbled"]), "--fast"]),
+    ]
+    # Numbers out of their range (2026-11-30, thirty-sixth session: a negative machine
+    # seed and a NaN --until ended in tracebacks, the others went through silently).
+    out_ = s(f["missing"].parent / "out.csv")  # a folder that exists: only the number is wrong
+    table = s(f["table-garbled"])
+    out += [
+        ("sim", "machine-negative", ["sim", "--machine", "-3", "--out", out_]),
+        ("sim", "passes-zero", ["sim", "--passes", "0", "--out", out_]),
+        ("sim", "load-nan", ["sim", "--scenario", "calibration", "--load", "nan", "--out", out_]),
+        ("sim", "payload-range-reversed", ["sim", "--payload-range", "9000", "2000", "--out",
+                                           out_]),
+        ("sim", "magnitude-infinite", ["sim", "--effect", "ground_slope=inf", "--out", out_]),
+        ("sim", "rate-zero", ["sim", "--rate", "0", "--out", out_]),
+        ("replay", "until-nan", ["replay", s(CAPTURE), "--fast", "--until", "nan"]),
+        ("replay", "keep-open-negative", ["replay", s(CAPTURE), "--fast", "--keep-open", "-1"]),
+        ("calibrate", "window-zero", ["calibrate", "--out", out_, "--window", "0", table]),
+        ("calibrate", "polyorder-too-low", ["calibrate", "--out", out_, "--polyorder", "1",
+                                            table]),
+        ("calibrate", "angle-drift-negative", ["calibrate", "--out", out_, "--angle-drift",
+                                               "-0.1", table]),
+        ("diagnose", "alpha-one", ["diagnose", "--calib", table, "--measured", table,
+                                   "--alpha", "1"]),
+        ("estimate", "truck-target-zero", ["estimate", "--params", s(PARAMS), "--truck-target",
+                                           "0", table]),
+        ("run", "duration-negative", ["run", "--config", s(f["missing"]), "--duration", "-1"]),
+        ("record", "duration-nan", ["record", "--config", s(f["missing"]), "--out", out_,
+                                    "--duration", "nan"]),
+        ("cab", "duration-zero", ["cab", "--duration", "0"]),
+        ("office", "duration-infinite", ["office", "--duration", "inf"]),
+        ("demo", "port-out-of-range", ["demo", "--port", "70000"]),
+        ("demo", "passes-zero", ["demo", "--passes", "0"]),
     ]
     return out
 

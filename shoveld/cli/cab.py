@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
 from shoveld.cli import CliError
+from shoveld.cli.options import COUNT, SECONDS
 from shoveld.endpoints import endpoint_arg
 from shoveld.payload.trucks import passes_words
 from shoveld.words import n_of
@@ -44,10 +45,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--mode", choices=("client", "peer"), default="client")
     p.add_argument("--shovel", default="*", help="shovel id to show (default: all)")
     p.add_argument("--prefix", default="shovel", help="key prefix (zenoh.prefix)")
-    p.add_argument("--duration", type=float, default=None, help="exit after this many seconds")
+    p.add_argument("--duration", type=SECONDS, default=None, help="exit after this many seconds")
     p.add_argument("--lines", action="store_true",
                    help="print one line per event even on a terminal")
-    p.add_argument("--until-closed-trucks", type=int, default=None, metavar="N",
+    p.add_argument("--until-closed-trucks", type=COUNT, default=None, metavar="N",
                    help="exit after N trucks were closed (demo, tests)")
     add_tls_arg(p)
     p.add_argument("--web", action="store_true",

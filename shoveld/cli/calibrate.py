@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 from shoveld.cli import CliError
 from shoveld.cli.common import parse_effects, read_tables
+from shoveld.cli.options import ORDER, SECONDS, number
 from shoveld.identify import ANGLE_DRIFT_DEG
 from shoveld.kinematics import (
     DEFAULT_POLYORDER,
@@ -46,18 +47,19 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "equation: the thesis form, for comparison")
     p.add_argument("--effects", default="", metavar="NAME,...",
                    help="extension terms to add to the base model")
-    p.add_argument("--window", type=float, default=DEFAULT_WINDOW_S,
+    p.add_argument("--window", type=SECONDS, default=DEFAULT_WINDOW_S,
                    help="zero-phase smoothing window of the identification's rates, s "
                         "(recorded in the params)")
-    p.add_argument("--polyorder", type=int, default=DEFAULT_POLYORDER,
+    p.add_argument("--polyorder", type=ORDER, default=DEFAULT_POLYORDER,
                    help="order of the Savitzky-Golay fit over that window")
-    p.add_argument("--payload-window", type=float, default=PAYLOAD_WINDOW_S, metavar="S",
+    p.add_argument("--payload-window", type=SECONDS, default=PAYLOAD_WINDOW_S, metavar="S",
                    help="the payload equations' smoothing window, s, recorded in the params "
                         "for the engine (lift and swing are slower than the trials' strokes; "
                         "docs/engine.md, \"The payload's own smoothing\")")
-    p.add_argument("--payload-polyorder", type=int, default=PAYLOAD_POLYORDER, metavar="N",
+    p.add_argument("--payload-polyorder", type=ORDER, default=PAYLOAD_POLYORDER, metavar="N",
                    help="order of the payload equations' Savitzky-Golay fit")
-    p.add_argument("--angle-drift", type=float, default=ANGLE_DRIFT_DEG, metavar="DEG",
+    p.add_argument("--angle-drift", type=number(0.0, unit="deg"), default=ANGLE_DRIFT_DEG,
+                   metavar="DEG",
                    help="slow drift of the handle-angle sensor within a file (1 sigma, "
                         "from its data sheet), counted in the standard errors; 0: not")
     p.add_argument("--angle-noise", action=argparse.BooleanOptionalAction, default=True,

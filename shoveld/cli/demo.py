@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from shoveld.cli import CliError
+from shoveld.cli.options import COUNT, KG, SEED, number
 from shoveld.words import n_of
 
 log = logging.getLogger("shoveld.demo")
@@ -37,13 +38,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "as emulators, the daemon reading them through the real drivers, Zenoh on "
                     "loopback, and the cab view in this terminal. About two minutes by "
                     "default; --passes for longer.")
-    p.add_argument("--passes", type=int, default=4, help="dig cycles to simulate (default 4, "
+    p.add_argument("--passes", type=COUNT, default=4, help="dig cycles to simulate (default 4, "
                    "about 25 s each)")
-    p.add_argument("--speed", type=float, default=1.0,
+    p.add_argument("--speed", type=number(0.0, lo_open=True, unit="times real time"), default=1.0,
                    help="times real time (the daemon runs on the same simulated clock)")
-    p.add_argument("--seed", type=int, default=7)
-    p.add_argument("--truck-target", type=float, default=136000.0)
-    p.add_argument("--port", type=int, default=7447, help="Zenoh listen port on 127.0.0.1")
+    p.add_argument("--seed", type=SEED, default=7)
+    p.add_argument("--truck-target", type=KG, default=136000.0)
+    p.add_argument("--port", type=number(1, 65535, integer=True), default=7447,
+                   help="Zenoh listen port on 127.0.0.1")
     p.add_argument("--params", default=None,
                    help="use this params file instead of calibrating first")
     p.add_argument("--state-dir", default=None,
@@ -132,8 +134,6 @@ def run(args: argparse.Namespace) -> int:
     from shoveld.daemon.service import Service
     from shoveld.sim.scenario import simulate_cycles
 
-    if args.passes < 1 or not args.speed > 0:
-        raise CliError("--passes must be >= 1 and --speed > 0")
     if not _port_free(args.port):
         raise CliError(f"127.0.0.1:{args.port} is in use (another demo or daemon?); "
                        "use --port")

@@ -9,6 +9,7 @@ import sys
 
 from shoveld.cli import CliError
 from shoveld.cli.common import parse_effects, read_tables
+from shoveld.cli.options import number
 from shoveld.words import n_of
 
 
@@ -29,11 +30,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="write report.md, plots (PNG) and extended.params.toml into DIR")
     p.add_argument("--candidates", default="", metavar="NAME,...",
                    help="limit the library of candidate extensions (default: all)")
-    p.add_argument("--alpha", type=float, default=0.01,
+    p.add_argument("--alpha", type=number(0.0, 1.0, lo_open=True, hi_open=True), default=0.01,
                    help="family-wise false-alarm probability per step (default 0.01)")
-    p.add_argument("--min-gain", type=float, default=0.02,
+    p.add_argument("--min-gain", type=number(0.0, 1.0, hi_open=True), default=0.02,
                    help="smallest share of the held-out residual an effect must remove")
-    p.add_argument("--max-effects", type=int, default=3)
+    p.add_argument("--max-effects", type=number(0, integer=True), default=3)
     p.add_argument("--method", choices=("output", "equation"), default="output",
                    help="output: currents as outputs, weighted by their noise (default); "
                         "equation: the thesis form, for comparison")

@@ -8,6 +8,7 @@ import sys
 
 from shoveld.cli import CliError
 from shoveld.cli.common import read_params, read_tables
+from shoveld.cli.options import KG, SECONDS
 from shoveld.payload.misfit import misfit_note
 
 
@@ -22,8 +23,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true",
                    help="one JSON object per pass on stdout; the truck summary as JSON "
                         "on stderr")
-    p.add_argument("--truck-target", type=float, default=136000.0, help="kg per truck")
-    p.add_argument("--truck-gap", type=float, default=20.0,
+    p.add_argument("--truck-target", type=KG, default=136000.0, help="kg per truck")
+    p.add_argument("--truck-gap", type=SECONDS, default=20.0,
                    help="a pause without digging this long (s) starts a new truck")
     p.add_argument("--plot", metavar="PNG",
                    help="plot phases, live payload and passes (one file per table: "
@@ -70,16 +71,19 @@ def run(args: argparse.Namespace) -> int:
                       f"{misfit_note(d['misfit'], cfg.misfit_warn)}")
         if est.passes:
             next_pass = est.passes[-1].index + 1
+        else:  # said, not left as an empty answer (a trial, a shift without digging)
+            span = float(table.time[-1] - table.time[0]) if len(table) else 0.0
+            print(f"{table.source}: no pass (no dig followed by a lift and a swing in its "
+                  f"{span:.0f} s)", file=sys.stderr)
         if est.trucks:
             next_truck = est.trucks[-1].index + 1
         trucks.extend(est.trucks)
     summary = {"trucks": [t.as_dict() for t in trucks], "rule_10_10_20": rule_101020(trucks)}
     if args.json:
         print(json.dumps(summary), file=sys.stderr)
-    else:
+    elif trucks:
         print()
         for t in trucks:
             print(f"truck {t.index:3d}: {truck_line(t.as_dict())}")
-        if trucks:
-            print(f"10/10/20 over {rule_summary(summary['rule_10_10_20'], closed=False)}")
+        print(f"10/10/20 over {rule_summary(summary['rule_10_10_20'], closed=False)}")
     return 0

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from shoveld.cli.cab import add_tls_arg, run_web
+from shoveld.cli.options import SECONDS
 from shoveld.endpoints import endpoint_arg
 
 
@@ -25,7 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--prefix", default="shovel", help="key prefix (zenoh.prefix)")
     p.add_argument("--listen", default="127.0.0.1:8081", metavar="HOST:PORT",
                    help="address of the page (default 127.0.0.1:8081)")
-    p.add_argument("--duration", type=float, default=None, help="exit after this many seconds")
+    p.add_argument("--duration", type=SECONDS, default=None, help="exit after this many seconds")
     add_tls_arg(p)
     p.set_defaults(func=run)
 

@@ -13,6 +13,8 @@ import signal
 import threading
 from typing import Any
 
+from shoveld.cli.options import SECONDS
+
 
 def register(subparsers: Any) -> None:
     p = subparsers.add_parser(
@@ -21,7 +23,7 @@ def register(subparsers: Any) -> None:
                     "see docs/captures.md) into a capture folder until --duration or Ctrl-C.")
     p.add_argument("--config", required=True, help="TOML file with [devices.<name>] sections")
     p.add_argument("--out", required=True, help="capture folder to create")
-    p.add_argument("--duration", type=float, default=None, metavar="S",
+    p.add_argument("--duration", type=SECONDS, default=None, metavar="S",
                    help="seconds to record (default: until interrupted)")
     p.add_argument("--overwrite", action="store_true", help="allow a non-empty --out folder")
     p.set_defaults(func=run)

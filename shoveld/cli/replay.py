@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from shoveld.cli import CliError
+from shoveld.cli.options import SECONDS, SECONDS_OR_NONE
 from shoveld.endpoints import endpoint_arg
 from shoveld.payload.misfit import misfit_note
 
@@ -55,14 +56,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--connect", action="append", default=None, metavar="ENDPOINT",
                    type=endpoint_arg, help="Zenoh endpoint to connect to (repeatable)")
     p.add_argument("--mode", choices=("peer", "client"), default=None)
-    p.add_argument("--zenoh-wait", type=float, default=2.0,
+    p.add_argument("--zenoh-wait", type=SECONDS_OR_NONE, default=2.0,
                    help="seconds to wait for the Zenoh session before playing")
-    p.add_argument("--until", type=float, default=None, metavar="S",
+    p.add_argument("--until", type=SECONDS, default=None, metavar="S",
                    help="stop at this capture time (seconds from its start)")
-    p.add_argument("--wait-subscribers", type=float, default=0.0, metavar="S",
+    p.add_argument("--wait-subscribers", type=SECONDS_OR_NONE, default=0.0, metavar="S",
                    help="wait up to S seconds for a subscriber of the pass topic before "
                         "playing (so it sees every pass)")
-    p.add_argument("--keep-open", type=float, default=0.0, metavar="S",
+    p.add_argument("--keep-open", type=SECONDS_OR_NONE, default=0.0, metavar="S",
                    help="stay on Zenoh this long after the end (late subscribers, queries)")
     p.add_argument("--json", action="store_true", help="JSON lines on stdout")
     # everything it opens is closed and removed before run returns (see run)
@@ -89,6 +90,10 @@ def build_config(args: argparse.Namespace, state_dir: Path) -> tuple[DaemonConfi
     from shoveld.cli.common import read_params
     from shoveld.daemon.config import ConfigError, check_params, load_config, parse_config
 
+    cap = Path(args.capture)
+    if not cap.is_dir():
+        raise CliError(f"{args.capture}: " + ("not a folder" if cap.exists() else "no such folder")
+                       + ": expected a capture folder (its manifest.json and recordings)")
     try:
         if args.config:
             cfg = load_config(args.config, check_drivers=False, require_devices=False)

@@ -8,6 +8,7 @@ import signal
 import threading
 
 from shoveld.cli import CliError
+from shoveld.cli.options import SECONDS
 
 log = logging.getLogger("shoveld.run")
 
@@ -23,7 +24,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--config", default=None, help=f"TOML file (default: {CONFIG_SEARCH})")
     p.add_argument("--state-dir", default=None,
                    help="override shovel.state_dir (where the pass log lives)")
-    p.add_argument("--duration", type=float, default=None,
+    p.add_argument("--duration", type=SECONDS, default=None,
                    help="stop after this many seconds (tests, trials)")
     p.set_defaults(func=run)
 

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from pathlib import Path
 
 from shoveld.cli import CliError
+from shoveld.cli.options import COUNT, KG, KG_OR_NONE, SEED, number
 from shoveld.words import n_of
 
 
@@ -16,25 +18,26 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Simulate dig cycles or a calibration trial. Writes OUT (a signals "
                     "table) and OUT.truth.json (true payload and phase times per pass).")
     p.add_argument("--scenario", choices=("cycles", "calibration"), default="cycles")
-    p.add_argument("--passes", type=int, default=12, help="passes to dig (cycles)")
-    p.add_argument("--load", type=float, default=0.0,
+    p.add_argument("--passes", type=COUNT, default=12, help="passes to dig (cycles)")
+    p.add_argument("--load", type=KG_OR_NONE, default=0.0,
                    help="known load in kg (calibration; the thesis used 8420)")
-    p.add_argument("--payload-range", type=float, nargs=2, metavar=("MIN", "MAX"),
+    p.add_argument("--payload-range", type=KG_OR_NONE, nargs=2, metavar=("MIN", "MAX"),
                    default=None, help="draw each pass's payload from MIN..MAX kg")
-    p.add_argument("--truck-target", type=float, default=136000.0,
+    p.add_argument("--truck-target", type=KG, default=136000.0,
                    help="truck target in kg; passes fill trucks to about it (cycles)")
-    p.add_argument("--verified-fraction", type=float, default=0.0,
+    p.add_argument("--verified-fraction", type=number(0.0, 1.0), default=0.0,
                    help="share of passes whose scale-verified payload is written")
-    p.add_argument("--rate", type=float, default=50.0, help="logger rate in Hz")
-    p.add_argument("--seed", type=int, default=0, help="seed of the path and the noise")
-    p.add_argument("--machine", type=int, default=0, metavar="N",
+    p.add_argument("--rate", type=number(0.0, lo_open=True, unit="Hz"), default=50.0,
+                   help="logger rate in Hz")
+    p.add_argument("--seed", type=SEED, default=0, help="seed of the path and the noise")
+    p.add_argument("--machine", type=SEED, default=0, metavar="N",
                    help="machine seed: draws the machine's mechanics, hoist drive and sensor "
                         "installation (offsets, gains, noise); give every file of one "
                         "machine the same N (default 0)")
     p.add_argument("--ideal", action="store_true",
                    help="the ideal machine instead: thesis values, unbiased 16-bit current "
                         "sensors, no drift, the two-level hoist field")
-    p.add_argument("--noise", type=float, default=1.0, help="sensor noise multiplier")
+    p.add_argument("--noise", type=number(0.0), default=1.0, help="sensor noise multiplier")
     p.add_argument("--effect", action="append", default=[], metavar="NAME[=MAGNITUDE]",
                    help="switch on a hidden physical effect (repeatable); see --list-effects")
     p.add_argument("--list-effects", action="store_true", help="list the effects and exit")
@@ -48,9 +51,12 @@ def parse_effect_args(items: list[str]) -> dict[str, float | None]:
     for item in items:
         name, _, mag = item.partition("=")
         try:
-            spec[name.strip()] = float(mag) if mag else None
+            x = float(mag) if mag else None
         except ValueError:
-            raise CliError(f"--effect {item!r}: magnitude must be a number") from None
+            x = math.nan
+        if x is not None and not math.isfinite(x):
+            raise CliError(f"--effect {item!r}: magnitude must be a finite number")
+        spec[name.strip()] = x
     return spec
 
 
@@ -67,6 +73,9 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if not args.out:
         raise CliError("--out FILE is required")
+    if args.payload_range and args.payload_range[0] > args.payload_range[1]:
+        raise CliError(f"--payload-range {args.payload_range[0]:g} {args.payload_range[1]:g}: "
+                       "expected MIN at most MAX")
     try:
         effects = fx.make_effects(parse_effect_args(args.effect), form="bench")
     except ValueError as e:

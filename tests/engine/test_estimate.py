@@ -124,6 +124,11 @@ def test_cli_round_trip(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> N
     summary = json.loads(out.err.strip().splitlines()[-1])
     assert summary["trucks"] and summary["rule_10_10_20"]["trucks"] >= 1
     assert "warning" not in out.err  # a simulated crowd never jumps (checks.crowd_jumps)
+    # a table without a pass (a trial) is said to have none, not answered with nothing
+    assert main(["estimate", "--params", p, e]) == 0
+    out = capsys.readouterr()
+    assert out.out == ""
+    assert f"{e}: no pass (no dig followed by a lift and a swing in its" in out.err
 
 
 def test_calibrate_takes_scale_verified_passes_with_the_trials(
