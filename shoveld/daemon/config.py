@@ -215,9 +215,11 @@ class _Reader:
 def _dataclass_from(where: str, cls: type, d: Mapping[str, Any], prefix: str,
                     skip: tuple[str, ...] = ()) -> Any:
     """Build a dataclass of numbers from a table (engine, phases, rls, installation);
-    the field defaults give the types, and unknown keys are errors."""
+    the field defaults give the types, the class's ``RANGES`` (if any) each number's
+    range, and unknown keys are errors."""
     r = _Reader(where, d, prefix)
     base = cls()
+    ranges: dict[str, dict[str, Any]] = getattr(cls, "RANGES", {})
     kw: dict[str, Any] = {}
     for f in dataclasses.fields(cls):
         default = getattr(base, f.name)
@@ -229,12 +231,12 @@ def _dataclass_from(where: str, cls: type, d: Mapping[str, Any], prefix: str,
         if isinstance(default, bool):
             kw[f.name] = r.boolean(f.name, default)
         elif isinstance(default, int):
-            v = r.number(f.name, float(default))
+            v = r.number(f.name, float(default), **ranges.get(f.name, {}))
             if v != int(v):
                 raise r.fail(f.name, f"must be an integer, got {v!r}")
             kw[f.name] = int(v)
         else:
-            kw[f.name] = r.number(f.name, default)
+            kw[f.name] = r.number(f.name, default, **ranges.get(f.name, {}))
     r.done()
     return cls(**kw)
 
@@ -546,6 +548,15 @@ def parse_config(doc: Mapping[str, Any], where: str = "<config>",
         eng_base, rate_hz=loop.rate_hz, truck_target_kg=target, truck_gap_s=gap,
         phases=_dataclass_from(where, PhaseConfig, phases_t, "engine.phases."),
         rls=_dataclass_from(where, RlsConfig, rls_t, "engine.rls."))
+    ph = engine.phases
+    if not ph.tuck_deg < ph.dig_exit_deg:
+        raise ConfigError(f"{where}: key 'engine.phases.tuck_deg' must be below "
+                          f"'dig_exit_deg' (a dig starts below the one and leaves the bank "
+                          f"above the other), got {ph.tuck_deg:g} and {ph.dig_exit_deg:g}")
+    if ph.swing_off_deg_s > ph.swing_on_deg_s:
+        raise ConfigError(f"{where}: key 'engine.phases.swing_off_deg_s' must be at most "
+                          f"'swing_on_deg_s', got {ph.swing_off_deg_s:g} and "
+                          f"{ph.swing_on_deg_s:g}")
 
     devs_t = top.table("devices")
     if devs_t or require_devices:

@@ -15,7 +15,7 @@ import statistics
 from collections import deque
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -181,6 +181,18 @@ class EngineConfig:
     weak_field_fraction: float = 0.97
     phases: PhaseConfig = field(default_factory=PhaseConfig)
     rls: RlsConfig = field(default_factory=RlsConfig)
+
+    RANGES: ClassVar[dict[str, dict[str, float | bool]]] = {
+        "warmup_s": {"lo": 0.0}, "batch": {"lo": 1}, "settle_s": {"lo": 0.0},
+        "settle_test_z": {"lo": 0.0}, "min_samples": {"lo": 1},
+        "min_crowd_travel_m": {"lo": 0.0}, "misfit_warn": {"lo": 0.0},
+        "empty_warn_kg": {"lo": 0.0}, "empty_returns": {"lo": 1},
+        "crowd_gap_s": {"positive": True}, "doubt_factor": {"lo": 0.0},
+        "hoist_field_nominal_a": {"positive": True},
+        "weak_field_fraction": {"lo": 0.0, "hi": 1.0}}
+    """What the configuration may set each number to (``shoveld.daemon.config``; 0 where
+    it switches a check off): a batch of 0 samples, a negative settle time or a crowd
+    gap of 0 s (every tick a gap) was taken until 2026-11-30."""
 
 
 @dataclass(slots=True)

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -32,6 +33,11 @@ class RlsConfig:
     prior_std_kg: float = 40000.0
     forgetting_std_kg_per_s: float = 0.0
     """Random walk of the payload per second (0: plain least squares over the pass)."""
+
+    RANGES: ClassVar[dict[str, dict[str, float | bool]]] = {
+        "prior_std_kg": {"positive": True}, "forgetting_std_kg_per_s": {"lo": 0.0}}
+    """What the configuration may set (``shoveld.daemon.config``): a prior of no spread
+    would hold the payload at ``prior_kg`` whatever the pass."""
 
 
 class PayloadRls:

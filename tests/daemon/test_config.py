@@ -112,6 +112,39 @@ def test_engine_sections_and_params_errors(example: Path) -> None:
         check_params(cfg)
 
 
+@pytest.mark.parametrize("section,line,key,why", [
+    ("engine", "batch = 0", "engine.batch", "must be >= 1"),
+    ("engine", "settle_s = -0.5", "engine.settle_s", "must be >= 0"),
+    ("engine", "crowd_gap_s = 0", "engine.crowd_gap_s", "must be > 0"),
+    ("engine", "doubt_factor = -2", "engine.doubt_factor", "must be >= 0"),
+    ("engine", "empty_returns = 0", "engine.empty_returns", "must be >= 1"),
+    ("engine", "weak_field_fraction = 1.5", "engine.weak_field_fraction", "must be <= 1"),
+    ("engine.phases", "rise_deg_s = 0", "engine.phases.rise_deg_s", "must be > 0"),
+    ("engine.phases", "tuck_deg = 10.0", "engine.phases.tuck_deg",
+     "must be below 'dig_exit_deg'"),
+    ("engine.phases", "swing_off_deg_s = 9.0", "engine.phases.swing_off_deg_s",
+     "must be at most 'swing_on_deg_s'"),
+    ("engine.rls", "prior_std_kg = 0", "engine.rls.prior_std_kg", "must be > 0"),
+])
+def test_an_engine_number_out_of_its_range_names_its_key(
+        example: Path, section: str, line: str, key: str, why: str) -> None:
+    """Until 2026-11-30 these were taken: a batch of no samples, a negative settle time, a
+    crowd gap of 0 s (every tick a gap, every pass in doubt), a prior of no spread."""
+    edit(example, "[zenoh]", f"[{section}]\n{line}\n\n[zenoh]")
+    with pytest.raises(ConfigError, match=re.escape(f"key '{key}' {why}")):
+        load_config(example)
+
+
+def test_the_engine_ranges_keep_the_switches_off_at_zero(example: Path) -> None:
+    """0 switches a check off where the docs say so (the empty dipper's, the crowd's
+    doubt, the settle test, the crowd's travel): still taken."""
+    edit(example, "[zenoh]", "[engine]\nempty_warn_kg = 0\ndoubt_factor = 0\n"
+                             "settle_test_z = 0\nmin_crowd_travel_m = 0\n\n[zenoh]")
+    cfg = load_config(example)
+    assert (cfg.engine.empty_warn_kg, cfg.engine.doubt_factor, cfg.engine.settle_test_z,
+            cfg.engine.min_crowd_travel_m) == (0.0, 0.0, 0.0, 0.0)
+
+
 def test_run_refuses_to_start_with_a_bad_config(example: Path,
                                                 capsys: pytest.CaptureFixture[str]) -> None:
     edit(example, "rate_hz = 100.0", "rate_hz = -3")
