@@ -62,6 +62,7 @@ def files(d: Path) -> dict[str, Path]:
         "cfg-channels-not-a-list": good_cfg + '[devices.adc]\nkind = "modbus_tcp"\n'
                                               'host = "127.0.0.1"\nchannels = 7\n',
         "cfg-port-a-list": good_cfg.replace('port = "/dev/ttyUSB9"', 'port = ["/dev/x"]'),
+        "cfg-engine-out-of-range": good_cfg + "[engine]\nbatch = 0\n",
         "params-nan": params.replace("value = ", "value = nan #", 1),
         "params-not-toml": "[params\n",
         "params-missing-key": params.replace("[noise]", "[noise_]", 1),
@@ -104,7 +105,7 @@ def cases(f: dict[str, Path]) -> list[tuple[str, str, list[str]]]:
         out.append(("check-config", k, ["check-config", s(f[k])]))
         out.append(("run", k, ["run", "--config", s(f[k]), "--duration", "0.1"]))
         if k not in ("cfg-wrong-type", "cfg-unknown-key", "cfg-bad-endpoint",
-                     "cfg-channels-not-a-list", "cfg-port-a-list"):
+                     "cfg-channels-not-a-list", "cfg-port-a-list", "cfg-engine-out-of-range"):
             # (the recorder reads only [devices] and [installation])
             out.append(("record", k, ["record", "--config", s(f[k]), "--out",
                                       s(f["nodir"]), "--duration", "0.1"]))
