@@ -12,6 +12,8 @@
   interleaved with ``fast`` so both see the same machine;
 * ``--command``: the whole ``shoveld replay CAPTURE --fast`` as a subprocess (start,
   imports, reading the capture, Zenoh session, the replay, shutdown), wall time;
+  ``--stages``: the same stages in a fresh interpreter, each timed (where that wall
+  time goes);
 * ``stepped``: the drivers in their threads on the drivers' virtual hardware (ptys,
   pymodbus TCP servers) on the stepped replay clock.
 
@@ -23,8 +25,8 @@ default, so the loop topics (joints, live payload, health) are not encoded;
 ``--subscriber`` adds a Zenoh subscriber to every topic in this process, as a cab
 watching the replay would be.
 
-Usage: ``.venv/bin/python bench/daemon_replay.py [--repeat 5] [--command] [--stepped]
-[--subscriber] [--json]``
+Usage: ``.venv/bin/python bench/daemon_replay.py [--repeat 5] [--command] [--stages]
+[--stepped] [--subscriber] [--json]``
 """
 
 from __future__ import annotations
@@ -176,6 +178,79 @@ def run_command(repeat: int) -> dict[str, Any]:
             "all_speed_x": [round(capture_s / w, 1) for w in walls]}
 
 
+# The stages of ``shoveld replay CAPTURE --fast`` in a fresh interpreter, in the
+# command's own order (shoveld.cli.replay.run), each timed: what the whole command's
+# wall time is made of.
+_STAGES = r"""
+import json, os, sys, time
+t0 = time.perf_counter()
+marks = []
+def mark(name):
+    marks.append((name, time.perf_counter()))
+import argparse, gc, tempfile, threading
+from pathlib import Path
+from shoveld.cli.common import one_blas_thread
+one_blas_thread()
+mark("the command line's modules")
+gc.disable()
+import numpy
+mark("numpy")
+from drivers.capture.format import CaptureFormatError
+from shoveld.daemon.logs import setup_logging
+from shoveld.payload.trucks import truck_line
+from shoveld.replay.service import fast_replay_service
+gc.enable()
+mark("the daemon's own modules")
+from shoveld.cli.replay import build_config
+ns = argparse.Namespace(capture=sys.argv[1], fast=True, config=None, params=None, mode=None,
+                        listen=[sys.argv[2]], connect=None, id=None, state_dir=None)
+tmp = tempfile.TemporaryDirectory()
+cfg, params = build_config(ns, Path(tmp.name))
+mark("the config and params")
+rr = fast_replay_service(ns.capture, cfg, params)
+mark("reading the capture, building the service")
+rr.service.durable_pass_log = False
+rr.service.start(zenoh_wait_s=2.0)
+mark("the Zenoh session")
+rr.run(threading.Event())
+mark("the play")
+rr.service.flush()
+rr.close()
+tmp.cleanup()
+mark("the end (pass log, Zenoh, temporary folder)")
+out, prev = [], t0
+for name, t in marks:
+    out.append([name, t - prev])
+    prev = t
+print(json.dumps({"stages": out, "in_process_s": prev - t0}))
+sys.stdout.flush()
+os._exit(0)
+"""
+
+
+def run_stages(repeat: int) -> dict[str, Any]:
+    """The whole command's stages (``_STAGES``), medians of ``repeat`` fresh interpreters;
+    the interpreter's own start and exit is the wall time less the time inside."""
+    import statistics
+    import subprocess
+    import sys
+
+    runs, outside = [], []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        r = subprocess.run([sys.executable, "-c", _STAGES, str(CAPTURE),
+                            f"tcp/127.0.0.1:{free_port()}"], check=True, capture_output=True,
+                           text=True, cwd=ROOT)
+        wall = time.perf_counter() - t0
+        d = json.loads(r.stdout.strip().splitlines()[-1])
+        runs.append(dict(d["stages"]))
+        outside.append(wall - d["in_process_s"])
+    names = list(runs[0])
+    out = {"the interpreter's start and exit": statistics.median(outside)}
+    out |= {n: statistics.median(r[n] for r in runs) for n in names}
+    return {k: round(v, 4) for k, v in out.items()}
+
+
 def _summary(runs: list[dict[str, Any]]) -> dict[str, Any]:
     med = sorted(runs, key=lambda r: r["speed_x"])[len(runs) // 2]
     return {"speed_x": med["speed_x"], "all_speed_x": [r["speed_x"] for r in runs],
@@ -191,6 +266,8 @@ def main() -> int:
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--command", action="store_true",
                     help="also the whole command (subprocess), --repeat runs")
+    ap.add_argument("--stages", action="store_true",
+                    help="also the whole command's stages, each timed (medians of --repeat)")
     ap.add_argument("--stepped", action="store_true", help="also the threaded stepped replay")
     ap.add_argument("--subscriber", action="store_true",
                     help="a Zenoh subscriber to every topic (the loop topics are then encoded)")
@@ -202,6 +279,8 @@ def main() -> int:
     # 10-30 ms slower (2026-11-29), a state of the machine no user starts it in
     if args.command:
         out["command"] = run_command(args.repeat)
+    if args.stages:
+        out["command_stages_s"] = run_stages(args.repeat)
     bulk, per_tick = [], []
     for _ in range(args.repeat):  # interleaved: a burst of load hits both alike
         bulk.append(run_once(False, False, args.subscriber))
@@ -241,6 +320,12 @@ def main() -> int:
         c = out["command"]
         print(f"whole command (shoveld replay --fast, subprocess): {c['speed_x']}x real time, "
               f"{c['wall_s']} s (median; runs {c['all_wall_s']} s)")
+    if "command_stages_s" in out:
+        st = out["command_stages_s"]
+        print(f"the whole command's stages (s, medians of {args.repeat} fresh interpreters; "
+              f"sum {sum(st.values()):.3f} s):")
+        for k, v in st.items():
+            print(f"  {v:7.3f}  {k}")
     if "stepped_threaded" in out:
         s = out["stepped_threaded"]
         print(f"stepped threaded replay (ptys, Modbus servers, driver threads): "
