@@ -72,6 +72,10 @@ def files(d: Path) -> dict[str, Path]:
         "table-no-header": "# format: shovel-signals/1\n",
         "mti-garbage": "this is not an Xbus stream",
     }
+    # a whole site's config (the example's, with a params file that is there): a run
+    # gets as far as its pass log
+    site = (ROOT / "examples" / "shoveld.toml").read_text()
+    (d / "site.toml").write_text(site.replace('params = "', f'params = "{PARAMS}" #"', 1))
     paths = {}
     for name, text in out.items():
         p = d / (name + (".toml" if name.startswith(("cfg", "params")) else ".csv"))
@@ -149,6 +153,10 @@ def cases(f: dict[str, Path]) -> list[tuple[str, str, list[str]]]:
         ("diagnose", "unknown-term", ["diagnose", "--calib", s(f["table-garbled"]),
                                       "--measured", s(f["table-garbled"]), "--library", "x"]),
         ("replay", "not-a-folder", ["replay", s(f["table-garbled"]), "--fast"]),
+        ("replay", "state-dir-a-file", ["replay", s(CAPTURE), "--fast", "--state-dir",
+                                        s(f["table-garbled"])]),
+        ("run", "state-dir-a-file", ["run", "--config", s(f["missing"].parent / "site.toml"),
+                                     "--state-dir", s(f["table-garbled"]), "--duration", "0.1"]),
     ]
     # Numbers out of their range (2026-11-30, thirty-sixth session: a negative machine
     # seed and a NaN --until ended in tracebacks, the others went through silently).

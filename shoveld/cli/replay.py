@@ -177,11 +177,16 @@ def run(args: argparse.Namespace) -> int:
         # a temporary pass log is removed below: syncing it to disk protects nothing
         rr.service.durable_pass_log = tmp is None
         stop = threading.Event()
+        import sqlite3
+
         from shoveld.cli.run import install_stop_signals
 
         install_stop_signals(stop)
         try:
-            rr.service.start(zenoh_wait_s=args.zenoh_wait)
+            try:
+                rr.service.start(zenoh_wait_s=args.zenoh_wait)
+            except (OSError, sqlite3.Error) as e:
+                raise CliError(f"cannot open the pass log in {cfg.state_dir}: {e}") from None
             if args.wait_subscribers > 0 and not rr.service.publisher.wait_subscribers(
                     args.wait_subscribers):
                 log.warning("no subscriber after %.1f s; playing anyway", args.wait_subscribers)

@@ -136,6 +136,8 @@ def connect(path: str | Path, readonly: bool = False, durable: bool = True
                                   check_same_thread=False)
         con.execute("PRAGMA busy_timeout = 5000")
         return con
+    if p.parent.exists() and not p.parent.is_dir():
+        raise NotADirectoryError("a file is there, not a folder")
     if not p.parent.exists():
         # owner-only whatever the umask of what starts us (a systemd unit's UMask, a
         # shell's): the pass log is the mine's production record
