@@ -460,9 +460,10 @@ def parse_config(doc: Mapping[str, Any], where: str = "<config>",
     top = _Reader(where, doc, "")
     sh = _Reader(where, top.table("shovel"), "shovel.")
     shovel_id = sh.string("id", "shovel")
-    if not _ID_RE.fullmatch(shovel_id):
-        raise sh.fail("id", f"may only use letters, digits, '_', '.', '-' (it is a Zenoh key "
-                            f"chunk), got {shovel_id!r}")
+    if not _ID_RE.fullmatch(shovel_id) or len(shovel_id) > 64:
+        raise sh.fail("id", f"may only use 1-64 letters, digits, '_', '.', '-' (it is a Zenoh "
+                            f"key chunk and the common name of its certificate), got "
+                            f"{shovel_id!r}")
     params = _path(base_dir, sh.string("params"))
     state_dir = _path(base_dir, sh.string("state_dir", "/var/lib/shoveld"))
     log_level = sh.string("log_level", "info", ("debug", "info", "warning", "error"))

@@ -25,8 +25,9 @@ from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 ROLES = ("shovel", "cab", "office", "maintenance", "router")
 """Who a certificate is for; the router's access control grants by role."""
 
-NAME_RE = re.compile(r"[A-Za-z0-9_.-]+")
-"""A peer's name is a file name and, for a shovel, one Zenoh key chunk."""
+NAME_RE = re.compile(r"[A-Za-z0-9_.-]{1,64}")
+"""A peer's name is a file name, its certificate's common name (at most 64 characters in
+X.509) and, for a shovel, one Zenoh key chunk."""
 
 DEFAULT_HOSTS = ("localhost", "127.0.0.1", "::1")
 CA_CERT = "ca.crt"
@@ -84,6 +85,9 @@ def _key_pem(key: ec.EllipticCurvePrivateKey) -> bytes:
 def init_ca(directory: str | Path, site: str = "shoveld site", days: int = 3650) -> Path:
     """Make the site CA (``ca.crt``, ``ca.key`` 0600) in ``directory``; its path."""
     d = Path(directory)
+    if not site.strip() or len(site) > 61 or not site.isprintable():
+        # the CA's common name is "SITE CA", and X.509 holds at most 64 characters there
+        raise PkiError(f"site {site!r}: expected a name of 1-61 printable characters")
     if not 0 < days <= 36500:
         raise PkiError(f"days must be > 0 and at most 36500, got {days}")
     try:
@@ -128,6 +132,20 @@ def _load_ca(d: Path) -> tuple[x509.Certificate, ec.EllipticCurvePrivateKey]:
     return cert, key
 
 
+_LABEL_RE = re.compile(r"[A-Za-z0-9](?:[A-Za-z0-9-]{0,61}[A-Za-z0-9])?")
+
+
+def _host_ok(h: str) -> bool:
+    """An IP address, or a host name others can dial (RFC 1123: dot-separated labels of
+    letters, digits and inner hyphens, each 1-63 characters, 253 in all)."""
+    try:
+        ipaddress.ip_address(h)
+        return True
+    except ValueError:
+        pass
+    return 0 < len(h) <= 253 and all(_LABEL_RE.fullmatch(x) for x in h.split("."))
+
+
 def _san(hosts: tuple[str, ...]) -> x509.SubjectAlternativeName:
     names: list[x509.GeneralName] = []
     for h in hosts:
@@ -145,10 +163,14 @@ def issue(directory: str | Path, name: str, role: str, hosts: tuple[str, ...] = 
     addresses others dial it at, for a router or a listening shovel)."""
     d = Path(directory)
     if not NAME_RE.fullmatch(name) or name in ("ca",):
-        raise PkiError(f"name {name!r}: use letters, digits, '_', '.', '-' (not 'ca'); "
+        raise PkiError(f"name {name!r}: use 1-64 letters, digits, '_', '.', '-' (not 'ca'); "
                        "for a shovel, its shovel.id")
     if role not in ROLES:
         raise PkiError(f"role {role!r}: must be one of {list(ROLES)}")
+    bad = [h for h in hosts if not _host_ok(h)]
+    if bad:
+        raise PkiError(f"--host {bad[0]!r}: expected an IP address or a host name (letters, "
+                       "digits and '-' in dot-separated labels of 1-63 characters)")
     if not 0 < days <= 36500:
         raise PkiError(f"days must be > 0 and at most 36500, got {days}")
     ca_cert, ca_key = _load_ca(d)
