@@ -109,6 +109,9 @@ def read_window(args: argparse.Namespace
 
     since = parse_when(args.since) if args.since else None
     until = parse_when(args.until) if args.until else None
+    if since is not None and until is not None and until <= since:
+        raise CliError(f"--until {args.until!r} is not after --since {args.since!r}: the "
+                       "window holds no time")
     path = _db(args)
     try:
         rows = read_passes(path, since, until)
