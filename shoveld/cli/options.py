@@ -30,7 +30,7 @@ def number(lo: float | None = None, hi: float | None = None, *, lo_open: bool = 
            unit: str = "") -> Callable[[str], float]:
     """A type for ``add_argument``: a finite number within [lo, hi] (``lo_open``: above
     lo, ``hi_open``: below hi), a whole one with ``integer``; ``unit`` is said after the
-    range ("s", "kg")."""
+    range ("seconds", "kg")."""
     expected = _range_words(lo, hi, lo_open, hi_open, integer) + (f" ({unit})" if unit else "")
 
     def parse(text: str) -> float:

@@ -135,6 +135,8 @@ def run(args: argparse.Namespace) -> int:
     collecting = gc.isenabled()
     gc.disable()
     try:
+        import sqlite3
+
         from drivers.capture.format import CaptureFormatError
         from shoveld.daemon.logs import setup_logging
         from shoveld.payload.trucks import truck_line
@@ -177,8 +179,6 @@ def run(args: argparse.Namespace) -> int:
         # a temporary pass log is removed below: syncing it to disk protects nothing
         rr.service.durable_pass_log = tmp is None
         stop = threading.Event()
-        import sqlite3
-
         from shoveld.cli.run import install_stop_signals
 
         install_stop_signals(stop)
