@@ -201,11 +201,18 @@ def cases(f: dict[str, Path]) -> list[tuple[str, str, list[str]]]:
 
 
 def run_case(command: str, case: str, argv: list[str]) -> Outcome:
+    import logging
+
     from shoveld.cli import main
 
     err, out = io.StringIO(), io.StringIO()
     tb = ""
     code: int | None = None
+    # a command that gets as far as the daemon's logging (run, replay) sets the root
+    # logger's level and handlers, as it should in its own process: put them back, so
+    # that the cases leave this process (a test session) as they found it
+    root = logging.getLogger()
+    level, handlers = root.level, list(root.handlers)
     with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):
         try:
             code = main(argv)
@@ -213,6 +220,14 @@ def run_case(command: str, case: str, argv: list[str]) -> Outcome:
             code = e.code if isinstance(e.code, int) else (0 if e.code is None else 2)
         except BaseException:  # noqa: BLE001 - a traceback is what is counted
             tb = traceback.format_exc()
+        finally:
+            for h in list(root.handlers):
+                if h not in handlers:
+                    root.removeHandler(h)
+            for h in handlers:
+                if h not in root.handlers:
+                    root.addHandler(h)
+            root.setLevel(level)
     text = err.getvalue()
     # argparse's usage lines come before its one error line: the error is the last line
     if text.startswith("usage:"):
