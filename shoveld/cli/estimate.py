@@ -72,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
         if est.passes:
             next_pass = est.passes[-1].index + 1
         else:  # said, not left as an empty answer (a trial, a shift without digging)
-            span = float(table.time[-1] - table.time[0]) if len(table) else 0.0
+            span = float(table.time[-1] - table.time[0])  # a table has a row at least
             print(f"{table.source}: no pass (no dig followed by a lift and a swing in its "
                   f"{span:.0f} s)", file=sys.stderr)
         if est.trucks:

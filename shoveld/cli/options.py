@@ -26,12 +26,13 @@ def _range_words(lo: float | None, hi: float | None, lo_open: bool, hi_open: boo
 
 
 def number(lo: float | None = None, hi: float | None = None, *, lo_open: bool = False,
-           hi_open: bool = False, integer: bool = False,
-           unit: str = "") -> Callable[[str], float]:
+           hi_open: bool = False, integer: bool = False, unit: str = "",
+           hint: str = "") -> Callable[[str], float]:
     """A type for ``add_argument``: a finite number within [lo, hi] (``lo_open``: above
     lo, ``hi_open``: below hi), a whole one with ``integer``; ``unit`` is said after the
-    range ("seconds", "kg")."""
-    expected = _range_words(lo, hi, lo_open, hi_open, integer) + (f" ({unit})" if unit else "")
+    range ("seconds", "kg"), and ``hint`` after that (another option that may be meant)."""
+    expected = (_range_words(lo, hi, lo_open, hi_open, integer) + (f" ({unit})" if unit else "")
+                + (f"; {hint}" if hint else ""))
 
     def parse(text: str) -> float:
         try:
@@ -43,17 +44,16 @@ def number(lo: float | None = None, hi: float | None = None, *, lo_open: bool = 
             raise argparse.ArgumentTypeError(f"{text!r}: expected {expected}")
         return x
 
-    parse.__name__ = "whole number" if integer else "number"  # argparse's fallback wording
     return parse
 
 
 SECONDS = number(0.0, lo_open=True, unit="seconds")
 """A duration that must pass: above zero seconds."""
-SECONDS_OR_NONE = number(0.0, unit="seconds")
+SECONDS_OR_ZERO = number(0.0, unit="seconds")
 """A wait that may be skipped: zero seconds or more."""
 KG = number(0.0, lo_open=True, unit="kg")
 """A mass that must be there (a truck's target)."""
-KG_OR_NONE = number(0.0, unit="kg")
+KG_OR_ZERO = number(0.0, unit="kg")
 """A mass that may be zero (a load, an empty dipper)."""
 COUNT = number(1, integer=True)
 """How many of something, one at least."""

@@ -6,7 +6,6 @@ import argparse
 import gc
 import json
 import logging
-import math
 import sys
 import tempfile
 import threading
@@ -14,7 +13,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from shoveld.cli import CliError
-from shoveld.cli.options import SECONDS, SECONDS_OR_NONE
+from shoveld.cli.options import SECONDS, SECONDS_OR_ZERO, number
 from shoveld.endpoints import endpoint_arg
 from shoveld.payload.misfit import misfit_note
 
@@ -23,6 +22,11 @@ if TYPE_CHECKING:
     from shoveld.model.params import ModelParams
 
 log = logging.getLogger("shoveld.replay")
+
+
+_PACE = number(0.0, lo_open=True, unit="times the recorded pace, e.g. 1 or 20",
+               hint="--fast replays as fast as the machine allows")
+"""--speed: a finite number of times the recorded pace, above zero."""
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -37,7 +41,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "trucks are printed as they are committed.")
     p.add_argument("capture", metavar="CAPTURE", help="capture folder (manifest.json)")
     mode = p.add_mutually_exclusive_group()
-    mode.add_argument("--speed", type=_pace, default=None,
+    mode.add_argument("--speed", type=_PACE, default=None,
                       help="times the recorded pace, > 0 (default 1.0)")
     mode.add_argument("--fast", action="store_true", help="as fast as possible, deterministic")
     p.add_argument("--config", default=None,
@@ -56,31 +60,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--connect", action="append", default=None, metavar="ENDPOINT",
                    type=endpoint_arg, help="Zenoh endpoint to connect to (repeatable)")
     p.add_argument("--mode", choices=("peer", "client"), default=None)
-    p.add_argument("--zenoh-wait", type=SECONDS_OR_NONE, default=2.0,
+    p.add_argument("--zenoh-wait", type=SECONDS_OR_ZERO, default=2.0,
                    help="seconds to wait for the Zenoh session before playing")
     p.add_argument("--until", type=SECONDS, default=None, metavar="S",
                    help="stop at this capture time (seconds from its start)")
-    p.add_argument("--wait-subscribers", type=SECONDS_OR_NONE, default=0.0, metavar="S",
+    p.add_argument("--wait-subscribers", type=SECONDS_OR_ZERO, default=0.0, metavar="S",
                    help="wait up to S seconds for a subscriber of the pass topic before "
                         "playing (so it sees every pass)")
-    p.add_argument("--keep-open", type=SECONDS_OR_NONE, default=0.0, metavar="S",
+    p.add_argument("--keep-open", type=SECONDS_OR_ZERO, default=0.0, metavar="S",
                    help="stay on Zenoh this long after the end (late subscribers, queries)")
     p.add_argument("--json", action="store_true", help="JSON lines on stdout")
     # everything it opens is closed and removed before run returns (see run)
     p.set_defaults(func=run, exit_at_once=True)
-
-
-def _pace(text: str) -> float:
-    """--speed: a finite number of times the recorded pace, above zero."""
-    try:
-        x = float(text)
-    except ValueError:
-        x = math.nan
-    if not (math.isfinite(x) and x > 0):
-        raise argparse.ArgumentTypeError(
-            f"{text!r}: expected a number above 0 (times the recorded pace, e.g. 1 or 20); "
-            "--fast replays as fast as the machine allows")
-    return x
 
 
 def build_config(args: argparse.Namespace, state_dir: Path) -> tuple[DaemonConfig, ModelParams]:

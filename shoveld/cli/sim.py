@@ -8,7 +8,7 @@ import math
 from pathlib import Path
 
 from shoveld.cli import CliError
-from shoveld.cli.options import COUNT, KG, KG_OR_NONE, SEED, number
+from shoveld.cli.options import COUNT, KG, KG_OR_ZERO, SEED, number
 from shoveld.words import n_of
 
 
@@ -19,9 +19,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "table) and OUT.truth.json (true payload and phase times per pass).")
     p.add_argument("--scenario", choices=("cycles", "calibration"), default="cycles")
     p.add_argument("--passes", type=COUNT, default=12, help="passes to dig (cycles)")
-    p.add_argument("--load", type=KG_OR_NONE, default=0.0,
+    p.add_argument("--load", type=KG_OR_ZERO, default=0.0,
                    help="known load in kg (calibration; the thesis used 8420)")
-    p.add_argument("--payload-range", type=KG_OR_NONE, nargs=2, metavar=("MIN", "MAX"),
+    p.add_argument("--payload-range", type=KG_OR_ZERO, nargs=2, metavar=("MIN", "MAX"),
                    default=None, help="draw each pass's payload from MIN..MAX kg")
     p.add_argument("--truck-target", type=KG, default=136000.0,
                    help="truck target in kg; passes fill trucks to about it (cycles)")
