@@ -135,64 +135,81 @@ class Recorder:
         self.clock = clock
         inst = config.get("installation")
         installation = _installation(inst, where) if inst is not None else None
+        # Every device's driver from its keys before the capture is opened: a refused key
+        # leaves the output folder as it was (no empty capture made, and an --overwrite
+        # keeps the old capture whole). Nothing is opened here: the drivers open their
+        # ports when they run, and take their taps then.
+        built = [self._build(name, dict(d), where) for name, d in config["devices"].items()]
         self.writer = CaptureWriter(out_dir, installation=installation, source=source,
                                     clock=clock, overwrite=overwrite, time_origin=time_origin)
         self.devices: list[_Device] = []
         self._stop = threading.Event()
         try:
-            for name, d in config["devices"].items():
-                self.devices.append(self._build(name, dict(d), where))
+            for dev, tap in built:
+                tap(self.writer)
+                self.devices.append(dev)
         except Exception:
             self.writer.close(0.0)
             raise
 
     # -- device construction ---------------------------------------------------------------
 
-    def _build(self, name: str, d: dict[str, Any], where: str) -> _Device:
+    def _build(self, name: str, d: dict[str, Any], where: str
+               ) -> tuple[_Device, Callable[[CaptureWriter], None]]:
+        """The device's driver from its keys, and how to put its tap into a capture."""
         kind = d["kind"]
         dev = _Device(name, kind)
+        tap: Callable[[CaptureWriter], None]
         try:
             if kind == "ar4000":
                 from drivers.acuity.ar4000 import Ar4000Config, Ar4000Driver
 
                 cfg = Ar4000Config.from_config(d)
                 drv = Ar4000Driver(name, cfg, clock=self.clock)
-                drv.tap = self.writer.add_serial(name, kind, port=cfg.port,
-                                                 baudrate=cfg.baudrate, config=d)
                 dev.driver = drv
+
+                def tap(w: CaptureWriter) -> None:
+                    drv.tap = w.add_serial(name, kind, port=cfg.port, baudrate=cfg.baudrate,
+                                           config=d)
             elif kind == "mti_serial":
                 import serial
 
                 from drivers.xsens.serial_driver import ORIENTATIONS, MtiSerialDriver
 
                 args = {k: v for k, v in d.items() if k != "kind"}
-                # the orientation and the extra outputs are recorded even when they are
-                # the default: the defaults changed, and a replay must configure what the
-                # device sent
-                tap = self.writer.add_serial(
-                    name, kind, port=d.get("port"), baudrate=d.get("baudrate", 115200),
-                    config={**d, "orientation": d.get("orientation", ORIENTATIONS[0]),
-                            "extra_outputs": list(d.get("extra_outputs", ()))})
+                taps: list[Any] = []
 
                 def factory(*a: Any, **kw: Any) -> Any:
-                    return TappedSerial(serial.Serial(*a, **kw), tap)
+                    return TappedSerial(serial.Serial(*a, **kw), taps[0])
 
                 args.setdefault("name", name)
                 dev.driver = MtiSerialDriver.from_config(args, clock=self.clock,
                                                          serial_factory=factory)
+
+                def tap(w: CaptureWriter) -> None:
+                    # the orientation and the extra outputs are recorded even when they
+                    # are the default: the defaults changed, and a replay must configure
+                    # what the device sent
+                    taps.append(w.add_serial(
+                        name, kind, port=d.get("port"), baudrate=d.get("baudrate", 115200),
+                        config={**d, "orientation": d.get("orientation", ORIENTATIONS[0]),
+                                "extra_outputs": list(d.get("extra_outputs", ()))}))
             elif kind == "mti_can":
-                self._build_can(dev, d)
+                tap = self._build_can(dev, d)
             else:
                 from drivers.modbus_adc.driver import ModbusAdcConfig, ModbusAdcDriver
 
                 mcfg = ModbusAdcConfig.from_config(d)
-                rec = self.writer.add_modbus(name, kind, config=mcfg.to_config())
-                dev.driver = ModbusAdcDriver(name, mcfg, clock=self.clock, register_log=rec)
+                adc = ModbusAdcDriver(name, mcfg, clock=self.clock)
+                dev.driver = adc
+
+                def tap(w: CaptureWriter) -> None:
+                    adc.register_log = w.add_modbus(name, kind, config=mcfg.to_config())
         except ValueError as e:
             raise RecordConfigError(f"{where}: [devices.{name}]: {e}") from None
-        return dev
+        return dev, tap
 
-    def _build_can(self, dev: _Device, d: dict[str, Any]) -> None:
+    def _build_can(self, dev: _Device, d: dict[str, Any]) -> Callable[[CaptureWriter], None]:
         import can
 
         from drivers.xsens.can_driver import MtiCanDriver
@@ -201,14 +218,18 @@ class Recorder:
         args.setdefault("name", dev.name)
         if "channel" not in args:
             raise ValueError("key 'channel' is required (e.g. 'can0')")
-        rec = self.writer.add_can(dev.name, dev.kind, channel=args["channel"],
-                                  interface=args.get("interface", "socketcan"),
-                                  bitrate=args.get("bitrate"), config=d)
+        recs: list[Any] = []
 
         def factory(**kw: Any) -> Any:
-            return TappedBus(can.Bus(**kw), rec)
+            return TappedBus(can.Bus(**kw), recs[0])
 
         dev.driver = MtiCanDriver.from_config(args, clock=self.clock, bus_factory=factory)
+
+        def tap(w: CaptureWriter) -> None:
+            recs.append(w.add_can(dev.name, dev.kind, channel=args["channel"],
+                                  interface=args.get("interface", "socketcan"),
+                                  bitrate=args.get("bitrate"), config=d))
+        return tap
 
     # -- running -------------------------------------------------------------------------
 

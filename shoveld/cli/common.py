@@ -72,3 +72,36 @@ def one_blas_thread() -> None:
     import os
 
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+
+def check_output(path: str, *, folder: bool = False) -> None:
+    """Refuse, before any work, an output the command could not write at its end (a
+    calibration or a diagnosis of hours of data is minutes of work to lose): a file in a
+    folder that does not exist or cannot be written, a file that is a folder, a folder
+    that is a file. A ``folder`` output is made with its parents, so its nearest existing
+    one must be a writable folder. The words are those of a late failure's line."""
+    import errno
+    import os
+
+    p = os.path.abspath(path)
+    if folder:
+        if os.path.exists(p) and not os.path.isdir(p):
+            raise CliError(f"{path}: {os.strerror(errno.ENOTDIR)} (a file is there; "
+                           "expected a folder)")
+        base = p
+        while not os.path.exists(base):
+            base = os.path.dirname(base)
+        if not os.path.isdir(base):
+            raise CliError(f"{path}: {os.strerror(errno.ENOTDIR)} ({base} is a file)")
+    else:
+        if os.path.isdir(p):
+            raise CliError(f"{path}: {os.strerror(errno.EISDIR)}")
+        base = os.path.dirname(p)
+        if not os.path.isdir(base):
+            raise CliError(f"{path}: {os.strerror(errno.ENOENT)} (the folder "
+                           f"{os.path.dirname(path) or '.'} does not exist)")
+        if os.path.exists(p) and not os.access(p, os.W_OK):
+            raise CliError(f"{path}: {os.strerror(errno.EACCES)}")
+    if not os.access(base, os.W_OK | os.X_OK):
+        raise CliError(f"{path}: {os.strerror(errno.EACCES)} (the folder {base} is not "
+                       "writable)")

@@ -8,7 +8,7 @@ import math
 import sys
 
 from shoveld.cli import CliError
-from shoveld.cli.common import parse_effects, read_tables
+from shoveld.cli.common import check_output, parse_effects, read_tables
 from shoveld.cli.options import number
 from shoveld.words import n_of
 
@@ -95,6 +95,8 @@ def run(args: argparse.Namespace) -> int:
     from shoveld.diagnose.report import as_json, write_report
     from shoveld.diagnose.select import SelectionConfig
 
+    if args.report:
+        check_output(args.report, folder=True)
     calib = read_tables(args.calib)
     measured = read_tables(args.measured)
     cfg = SelectionConfig(alpha=args.alpha, min_gain=args.min_gain,

@@ -27,11 +27,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from shoveld.cli.common import check_output
     from shoveld.cli.passes import read_window
     from shoveld.daemon.persist import read_calibrations, read_empties
     from shoveld.report.figures import shift_figures
     from shoveld.report.write import write_report
 
+    check_output(args.out, folder=True)
     rows, path, since, until = read_window(args)
     figures = shift_figures(rows, since, until, empties=read_empties(path, since, until),
                             calibrations=read_calibrations(path))

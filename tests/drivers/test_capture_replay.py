@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 import time
 import uuid
 from collections.abc import Callable
@@ -23,6 +24,8 @@ from hil_fixtures.modbus_adc import ModbusAdcEmulator
 from hil_fixtures.virtual_shovel import INCLINOMETER_CHANNELS, MOTOR_CHANNELS, DriverRunner
 from shoveld.installation import Installation
 from shoveld.signals import SignalsTable
+
+CAPTURES = Path(__file__).resolve().parents[2] / "hil_fixtures" / "captures"
 
 CHANNELS = ChannelMap.from_config([
     {"name": "hoist1_a", "register": 0, "scale": 400.0},
@@ -261,6 +264,38 @@ def test_record_config_errors(tmp_path: Path, text: str, msg: str) -> None:
     with pytest.raises(RecordConfigError, match=r"\[devices.l\]: ar4000: unknown key 'speed'"):
         Recorder({"devices": {"l": {"kind": "ar4000", "port": "/dev/x", "speed": 1}}},
                  tmp_path / "o")
+
+
+@pytest.mark.parametrize("device", [
+    {"kind": "ar4000"},  # no port
+    {"kind": "mti_serial", "port": "/dev/x", "baudrate": "fast"},
+    {"kind": "mti_can", "interface": "virtual"},  # no channel
+    {"kind": "modbus_tcp", "host": "127.0.0.1", "channels": 7},
+])
+def test_a_refused_device_leaves_the_output_as_it_was(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], device: dict[str, Any]) -> None:
+    """The devices' keys are checked before the capture is opened: a refused one makes no
+    empty capture, and an ``--overwrite`` of an old capture does not replace its manifest
+    with one of no device (it did, 2026-11-30: the old capture could no longer be
+    replayed). The laser comes first, so its file would be the first written."""
+    from shoveld.cli import main
+
+    good = {"kind": "ar4000", "port": "/dev/x"}
+    cfg = tmp_path / "rec.toml"
+    cfg.write_text("".join(
+        f"[devices.{n}]\n" + "".join(f"{k} = {json.dumps(v)}\n" for k, v in d.items())
+        for n, d in (("laser", good), ("bad", device))))
+    new = tmp_path / "new" / "capture"
+    assert main(["record", "--config", str(cfg), "--out", str(new), "--duration", "0.1"]) == 2
+    assert "[devices.bad]" in capsys.readouterr().err
+    assert not (tmp_path / "new").exists()
+    old = tmp_path / "old"
+    shutil.copytree(CAPTURES / "daemon-e2e", old)
+    before = {p.name: p.read_bytes() for p in old.iterdir()}
+    assert main(["record", "--config", str(cfg), "--out", str(old), "--overwrite",
+                 "--duration", "0.1"]) == 2
+    assert "[devices.bad]" in capsys.readouterr().err
+    assert {p.name: p.read_bytes() for p in old.iterdir()} == before
 
 
 def test_make_capture_from_a_signals_table(tmp_path: Path) -> None:
