@@ -190,6 +190,18 @@ def cases(f: dict[str, Path]) -> list[tuple[str, str, list[str]]]:
                                            out_]),
         ("sim", "magnitude-infinite", ["sim", "--effect", "ground_slope=inf", "--out", out_]),
         ("sim", "rate-zero", ["sim", "--rate", "0", "--out", out_]),
+        # Options the command would ignore (2026-11-30, thirty-seventh session: taken
+        # without a word; --load on the dig cycles wrote passes of random payloads)
+        ("sim", "load-on-cycles", ["sim", "--load", "8420", "--out", out_]),
+        ("sim", "passes-on-calibration", ["sim", "--scenario", "calibration", "--passes",
+                                          "3", "--out", out_]),
+        ("sim", "effect-twice", ["sim", "--effect", "ground_slope=1", "--effect",
+                                 "ground_slope=2", "--out", out_]),
+        ("sim", "machine-and-ideal", ["sim", "--machine", "3", "--ideal", "--out", out_]),
+        ("sim", "range-and-target", ["sim", "--payload-range", "1000", "2000",
+                                     "--truck-target", "9000", "--out", out_]),
+        ("cab", "listen-without-web", ["cab", "--listen", "127.0.0.1:8089", "--duration", "5"]),
+        ("cab", "lines-with-web", ["cab", "--web", "--lines", "--duration", "5"]),
         ("replay", "until-nan", ["replay", s(CAPTURE), "--fast", "--until", "nan"]),
         ("replay", "keep-open-negative", ["replay", s(CAPTURE), "--fast", "--keep-open", "-1"]),
         ("calibrate", "window-zero", ["calibrate", "--out", out_, "--window", "0", table]),

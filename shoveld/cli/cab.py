@@ -54,7 +54,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--web", action="store_true",
                    help="serve the cab page (a kiosk browser on the cab panel opens it) "
                         "instead of drawing in the terminal")
-    p.add_argument("--listen", default="127.0.0.1:8080", metavar="HOST:PORT",
+    p.add_argument("--listen", default=None, metavar="HOST:PORT",
                    help="address of the page with --web (default 127.0.0.1:8080)")
     p.set_defaults(func=run)
 
@@ -81,8 +81,9 @@ def run_web(args: argparse.Namespace, page: str) -> int:
     """``--web``: the page server with its Zenoh bridge (``shoveld.web``)."""
     from shoveld.web.server import ZenohSource, parse_listen, run_screen
 
+    listen = args.listen or "127.0.0.1:8080"
     try:
-        host, port = parse_listen(args.listen)
+        host, port = parse_listen(listen)
     except ValueError as e:
         raise CliError(str(e)) from None
     src = ZenohSource(args.connect or ["tcp/127.0.0.1:7447"], args.mode, args.shovel,
@@ -90,7 +91,7 @@ def run_web(args: argparse.Namespace, page: str) -> int:
     try:
         run_screen(src, host, port, page, args.duration)
     except OSError as e:
-        raise CliError(f"--listen {args.listen}: {e.strerror or e}") from None
+        raise CliError(f"--listen {listen}: {e.strerror or e}") from None
     return 0
 
 
@@ -467,8 +468,18 @@ def connect_waiting(state: CabState, args: argparse.Namespace, tls: TlsConfig | 
 
 
 def run(args: argparse.Namespace) -> int:
+    # an option of the other view was ignored without a word (a --listen without --web
+    # drew in the terminal, and no page was served where the kiosk looked for it)
     if args.web:
+        other = [o for o, v in (("--lines", args.lines),
+                                ("--until-closed-trucks", args.until_closed_trucks)) if v]
+        if other:
+            raise CliError(f"{', '.join(other)}: for the cab in the terminal, not the page "
+                           "(--web)")
         return run_web(args, "")
+    if args.listen is not None:
+        raise CliError("--listen is the address of the cab page: add --web (the cab in the "
+                       "terminal serves no page)")
     state = CabState()
     tls = tls_from_args(args)
     client = connect_waiting(state, args, tls)

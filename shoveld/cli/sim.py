@@ -18,23 +18,27 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Simulate dig cycles or a calibration trial. Writes OUT (a signals "
                     "table) and OUT.truth.json (true payload and phase times per pass).")
     p.add_argument("--scenario", choices=("cycles", "calibration"), default="cycles")
-    p.add_argument("--passes", type=COUNT, default=12, help="passes to dig (cycles)")
-    p.add_argument("--load", type=KG_OR_ZERO, default=0.0,
-                   help="known load in kg (calibration; the thesis used 8420)")
+    p.add_argument("--passes", type=COUNT, default=None,
+                   help="passes to dig (cycles; default 12)")
+    p.add_argument("--load", type=KG_OR_ZERO, default=None,
+                   help="known load in kg (calibration; the thesis used 8420; default 0)")
     p.add_argument("--payload-range", type=KG_OR_ZERO, nargs=2, metavar=("MIN", "MAX"),
                    default=None, help="draw each pass's payload from MIN..MAX kg")
-    p.add_argument("--truck-target", type=KG, default=136000.0,
-                   help="truck target in kg; passes fill trucks to about it (cycles)")
-    p.add_argument("--verified-fraction", type=number(0.0, 1.0), default=0.0,
-                   help="share of passes whose scale-verified payload is written")
+    p.add_argument("--truck-target", type=KG, default=None,
+                   help="truck target in kg; passes fill trucks to about it (cycles; "
+                        "default 136000)")
+    p.add_argument("--verified-fraction", type=number(0.0, 1.0), default=None,
+                   help="share of passes whose scale-verified payload is written (cycles; "
+                        "default 0)")
     p.add_argument("--rate", type=number(0.0, lo_open=True, unit="Hz"), default=50.0,
                    help="logger rate in Hz")
     p.add_argument("--seed", type=SEED, default=0, help="seed of the path and the noise")
-    p.add_argument("--machine", type=SEED, default=0, metavar="N",
+    which = p.add_mutually_exclusive_group()
+    which.add_argument("--machine", type=SEED, default=0, metavar="N",
                    help="machine seed: draws the machine's mechanics, hoist drive and sensor "
                         "installation (offsets, gains, noise); give every file of one "
                         "machine the same N (default 0)")
-    p.add_argument("--ideal", action="store_true",
+    which.add_argument("--ideal", action="store_true",
                    help="the ideal machine instead: thesis values, unbiased 16-bit current "
                         "sensors, no drift, the two-level hoist field")
     p.add_argument("--noise", type=number(0.0), default=1.0, help="sensor noise multiplier")
@@ -56,8 +60,43 @@ def parse_effect_args(items: list[str]) -> dict[str, float | None]:
             x = math.nan
         if x is not None and not math.isfinite(x):
             raise CliError(f"--effect {item!r}: magnitude must be a finite number")
-        spec[name.strip()] = x
+        name = name.strip()
+        if name in spec:
+            raise CliError(f"--effect {item!r}: {name} is already switched on (by "
+                           f"--effect {name}{'' if spec[name] is None else f'={spec[name]:g}'}"
+                           "): give each effect once")
+        spec[name] = x
     return spec
+
+
+CYCLES_ONLY = ("passes", "payload_range", "truck_target", "verified_fraction")
+"""Options of the dig cycles, which a calibration trial has no use for."""
+
+
+def check_scenario(args: argparse.Namespace) -> None:
+    """Refuse an option the scenario would not use (it was ignored: ``--load 8420`` on
+    the dig cycles wrote passes of random payloads, not of 8,420 kg), then put the
+    defaults in."""
+    def flag(name: str) -> str:
+        return "--" + name.replace("_", "-")
+
+    if args.scenario == "cycles":
+        if args.load is not None:
+            raise CliError("--load is the known load of --scenario calibration; the dig "
+                           "cycles draw each pass's payload (--payload-range MIN MAX sets "
+                           "its range)")
+        if args.payload_range and args.truck_target is not None:
+            raise CliError("--truck-target fills trucks with passes drawn to suit it, and "
+                           "--payload-range draws each pass in its range instead: give one")
+    else:
+        given = [flag(k) for k in CYCLES_ONLY if getattr(args, k) is not None]
+        if given:
+            raise CliError(f"{', '.join(given)}: for --scenario cycles; a calibration "
+                           "trial is one run at --load KG")
+    for k, v in (("passes", 12), ("load", 0.0), ("truck_target", 136000.0),
+                 ("verified_fraction", 0.0)):
+        if getattr(args, k) is None:
+            setattr(args, k, v)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -73,6 +112,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if not args.out:
         raise CliError("--out FILE is required")
+    check_scenario(args)
     if args.payload_range and args.payload_range[0] > args.payload_range[1]:
         raise CliError(f"--payload-range {args.payload_range[0]:g} {args.payload_range[1]:g}: "
                        "expected MIN at most MAX")
