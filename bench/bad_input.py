@@ -167,6 +167,8 @@ def cases(f: dict[str, Path]) -> list[tuple[str, str, list[str]]]:
                                        s(f["table-garbled"])]),
         ("calibrate", "plot-a-file", ["calibrate", "--out", s(f["missing"].parent / "p.toml"),
                                       "--plot", s(f["table-garbled"]), s(f["table-garbled"])]),
+        ("estimate", "plot-a-folder", ["estimate", "--params", s(PARAMS), "--plot",
+                                       s(f["missing"].parent), s(f["table-garbled"])]),
         ("diagnose", "report-a-file", ["diagnose", "--calib", s(f["table-garbled"]),
                                        "--measured", s(f["table-garbled"]), "--report",
                                        s(f["table-garbled"])]),

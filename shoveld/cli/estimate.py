@@ -7,7 +7,7 @@ import json
 import sys
 
 from shoveld.cli import CliError
-from shoveld.cli.common import read_params, read_tables
+from shoveld.cli.common import check_output, read_params, read_tables
 from shoveld.cli.options import KG, SECONDS
 from shoveld.payload.misfit import misfit_note
 
@@ -37,6 +37,8 @@ def run(args: argparse.Namespace) -> int:
     from shoveld.engine.offline import estimate_table
     from shoveld.payload.trucks import rule_101020, rule_summary, truck_line
 
+    if args.plot:
+        check_output(args.plot)  # (a folder was written to as FOLDER/.png)
     params = read_params(args.params)
     tables = read_tables(args.files)
     cfg = EngineConfig(truck_target_kg=args.truck_target, truck_gap_s=args.truck_gap)

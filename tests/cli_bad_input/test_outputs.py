@@ -45,6 +45,16 @@ def test_calibrate_out_a_folder_and_plot_a_file(tmp_path: Path, garbled: Path,
     assert not (tmp_path / "p.toml").exists()
 
 
+def test_estimate_plot_a_folder(tmp_path: Path, garbled: Path,
+                                capsys: pytest.CaptureFixture[str]) -> None:
+    """A folder as the PNG was written to as FOLDER/.png, a hidden file, and said
+    "plot: FOLDER"."""
+    params = Path(__file__).resolve().parents[2] / "hil_fixtures/captures/daemon-e2e/params.toml"
+    assert _err(["estimate", "--params", str(params), "--plot", str(tmp_path), str(garbled)],
+                capsys).endswith(f"{tmp_path}: Is a directory")
+    assert not (tmp_path / ".png").exists()
+
+
 def test_report_folders_under_a_file(tmp_path: Path, garbled: Path,
                                      capsys: pytest.CaptureFixture[str]) -> None:
     below = garbled / "a" / "b"
