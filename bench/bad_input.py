@@ -167,6 +167,12 @@ def cases(f: dict[str, Path]) -> list[tuple[str, str, list[str]]]:
                                        s(f["table-garbled"])]),
         ("calibrate", "plot-a-file", ["calibrate", "--out", s(f["missing"].parent / "p.toml"),
                                       "--plot", s(f["table-garbled"]), s(f["table-garbled"])]),
+        # The same table twice: its data would count twice (2026-11-30, thirty-seventh
+        # session: a calibration's standard errors shrank as for one more trial)
+        ("calibrate", "table-twice", ["calibrate", "--out", s(f["missing"].parent / "p.toml"),
+                                      s(f["table-garbled"]), s(f["table-garbled"])]),
+        ("estimate", "table-twice", ["estimate", "--params", s(PARAMS), s(f["table-garbled"]),
+                                     s(f["table-garbled"])]),
         ("estimate", "plot-a-folder", ["estimate", "--params", s(PARAMS), "--plot",
                                        s(f["missing"].parent), s(f["table-garbled"])]),
         ("diagnose", "report-a-file", ["diagnose", "--calib", s(f["table-garbled"]),

@@ -9,7 +9,7 @@ import sys
 from typing import TYPE_CHECKING, Any
 
 from shoveld.cli import CliError
-from shoveld.cli.common import check_output, parse_effects, read_tables
+from shoveld.cli.common import check_output, parse_effects, read_tables, refuse_repeats
 from shoveld.cli.options import ORDER, SECONDS, number
 from shoveld.identify import ANGLE_DRIFT_DEG
 from shoveld.kinematics import (
@@ -179,6 +179,7 @@ def run(args: argparse.Namespace) -> int:
     check_output(args.out)
     if args.plot:
         check_output(args.plot, folder=True)
+    refuse_repeats(args.files + args.verified)
     tables = read_tables(args.files)
     try:
         model = Model.from_names(parse_effects(args.effects))

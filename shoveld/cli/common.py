@@ -105,3 +105,40 @@ def check_output(path: str, *, folder: bool = False) -> None:
     if not os.access(base, os.W_OK | os.X_OK):
         raise CliError(f"{path}: {os.strerror(errno.EACCES)} (the folder {base} is not "
                        "writable)")
+
+
+def refuse_repeats(paths: list[str]) -> None:
+    """The same data given twice would count twice: a calibration's standard errors
+    shrink as if there were one more trial (Md's from 110 to 94 kg with a trial given
+    twice), an estimate lists every pass twice. Refused: one file by two names (a
+    shell glob and a name, a link) or two files with the same bytes (a copy)."""
+    import hashlib
+    import os
+
+    first: dict[tuple[int, int], str] = {}
+    by_size: dict[int, list[str]] = {}
+    for p in paths:
+        try:
+            st = os.stat(p)
+        except OSError:
+            continue  # the reader names it
+        key = (st.st_dev, st.st_ino)
+        if key in first:
+            also = "" if first[key] == p else f" (as {first[key]} too)"
+            raise CliError(f"{p}: given twice{also}: its data would count twice")
+        first[key] = p
+        by_size.setdefault(st.st_size, []).append(p)
+    for same_size in by_size.values():
+        if len(same_size) < 2:
+            continue
+        digests: dict[str, str] = {}
+        for p in same_size:
+            try:
+                with open(p, "rb") as f:
+                    d = hashlib.file_digest(f, "sha1").hexdigest()
+            except OSError:
+                continue
+            if d in digests:
+                raise CliError(f"{p}: the same data as {digests[d]} (a copy): its data "
+                               "would count twice")
+            digests[d] = p

@@ -8,7 +8,7 @@ import math
 import sys
 
 from shoveld.cli import CliError
-from shoveld.cli.common import check_output, parse_effects, read_tables
+from shoveld.cli.common import check_output, parse_effects, read_tables, refuse_repeats
 from shoveld.cli.options import number
 from shoveld.words import n_of
 
@@ -97,6 +97,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.report:
         check_output(args.report, folder=True)
+    refuse_repeats(args.calib)
+    refuse_repeats(args.measured)
     calib = read_tables(args.calib)
     measured = read_tables(args.measured)
     cfg = SelectionConfig(alpha=args.alpha, min_gain=args.min_gain,

@@ -7,7 +7,7 @@ import json
 import sys
 
 from shoveld.cli import CliError
-from shoveld.cli.common import check_output, read_params, read_tables
+from shoveld.cli.common import check_output, read_params, read_tables, refuse_repeats
 from shoveld.cli.options import KG, SECONDS
 from shoveld.payload.misfit import misfit_note
 
@@ -39,6 +39,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.plot:
         check_output(args.plot)  # (a folder was written to as FOLDER/.png)
+    refuse_repeats(args.files)
     params = read_params(args.params)
     tables = read_tables(args.files)
     cfg = EngineConfig(truck_target_kg=args.truck_target, truck_gap_s=args.truck_gap)
