@@ -49,9 +49,23 @@ def add_log_window(p: argparse.ArgumentParser) -> None:
     p.add_argument("--until", default=None, metavar="WHEN", help="... and before WHEN")
 
 
+LATEST = dt.datetime(9999, 12, 30, tzinfo=dt.UTC).timestamp()
+"""The last time a pass log's dates can be written for (a day short of year 9999's end,
+for any time zone)."""
+
+
 def parse_when(text: str, now: float | None = None) -> float:
     """ISO 8601 (local time if naive), Unix seconds, ``<n>[smhd]`` before now, or
-    ``today`` / ``yesterday`` (local midnight)."""
+    ``today`` / ``yesterday`` (local midnight); from 1970 to 9999 (a time the dates of
+    the output cannot hold ended in a traceback: ``--since 99999999999999``,
+    ``--since 0001-01-01``)."""
+    t = _when(text, now)
+    if not 0.0 <= t <= LATEST:
+        raise CliError(f"time {text!r} is outside 1970-01-01 .. 9999-12-30 (UTC)")
+    return t
+
+
+def _when(text: str, now: float | None) -> float:
     now = time.time() if now is None else now
     s = text.strip()
     if s.lower() in ("today", "yesterday", "now"):
@@ -74,7 +88,10 @@ def parse_when(text: str, now: float | None = None) -> float:
         raise CliError(f"cannot read time {text!r}: use e.g. 2026-11-21T18:00, 2026-11-21, "
                        "12h, yesterday, or Unix seconds") from None
     if d.tzinfo is None:
-        d = d.astimezone()  # naive = local time
+        try:
+            d = d.astimezone()  # naive = local time
+        except (OverflowError, ValueError):  # a date at the ends of what datetime holds
+            return -1.0
     return d.timestamp()
 
 

@@ -137,6 +137,21 @@ def test_parse_when() -> None:
     today, yesterday = parse_when("today", now), parse_when("yesterday", now)
     assert 0 <= now - today < 86400 and 82800 <= today - yesterday <= 90000
     assert parse_when("2026-11-21", now) == parse_when("2026-11-21T00:00", now)
+    # a time the output's dates cannot hold (a traceback at the listing, until 2026-11-30)
+    for far in ("99999999999999", "0001-01-01", "9999-12-31T23:59+00:00", "99999999d"):
+        with pytest.raises(Exception, match=r"outside 1970-01-01 \.\. 9999-12-30"):
+            parse_when(far, now)
+    assert parse_when("9999-12-29T00:00+00:00", now) == 253402041600.0
+
+
+@pytest.mark.parametrize("when", ["99999999999999", "0001-01-01"])
+def test_a_time_out_of_the_calendar_is_one_line(when: str, tmp_path: Path, capsys) -> None:
+    from shoveld.cli import main
+
+    for cmd in (["passes"], ["report", "--out", str(tmp_path / "r")]):
+        assert main([*cmd, "--db", str(tmp_path / "none.sqlite"), "--since", when]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "outside 1970-01-01" in err[0], err
 
 
 def test_commands_find_a_local_config_before_the_installed_one(tmp_path: Path, monkeypatch,
