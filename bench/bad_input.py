@@ -212,6 +212,8 @@ def cases(f: dict[str, Path]) -> list[tuple[str, str, list[str]]]:
         ("sim", "machine-and-ideal", ["sim", "--machine", "3", "--ideal", "--out", out_]),
         ("sim", "range-and-target", ["sim", "--payload-range", "1000", "2000",
                                      "--truck-target", "9000", "--out", out_]),
+        ("replay", "id-with-slash", ["replay", s(CAPTURE), "--fast", "--id", "a/b"]),
+        ("cab", "prefix-empty", ["cab", "--prefix", "", "--duration", "5"]),
         ("cab", "listen-without-web", ["cab", "--listen", "127.0.0.1:8089", "--duration", "5"]),
         ("cab", "lines-with-web", ["cab", "--web", "--lines", "--duration", "5"]),
         ("replay", "until-nan", ["replay", s(CAPTURE), "--fast", "--until", "nan"]),

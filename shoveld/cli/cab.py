@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, TextIO
 
 from shoveld.cli import CliError
-from shoveld.cli.options import COUNT, SECONDS
+from shoveld.cli.options import COUNT, KEY_PREFIX, SECONDS, SHOVEL_OR_ALL
 from shoveld.endpoints import endpoint_arg
 from shoveld.payload.trucks import passes_words
 from shoveld.words import n_of
@@ -43,8 +43,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="Zenoh endpoint to connect to (repeatable; default "
                         "tcp/127.0.0.1:7447)")
     p.add_argument("--mode", choices=("client", "peer"), default="client")
-    p.add_argument("--shovel", default="*", help="shovel id to show (default: all)")
-    p.add_argument("--prefix", default="shovel", help="key prefix (zenoh.prefix)")
+    p.add_argument("--shovel", type=SHOVEL_OR_ALL, default="*",
+                   help="shovel id to show (default: all)")
+    p.add_argument("--prefix", type=KEY_PREFIX, default="shovel",
+                   help="key prefix (zenoh.prefix)")
     p.add_argument("--duration", type=SECONDS, default=None, help="exit after this many seconds")
     p.add_argument("--lines", action="store_true",
                    help="print one line per event even on a terminal")

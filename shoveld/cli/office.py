@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from shoveld.cli.cab import add_tls_arg, run_web
-from shoveld.cli.options import SECONDS
+from shoveld.cli.options import KEY_PREFIX, SECONDS, SHOVEL_OR_ALL
 from shoveld.endpoints import endpoint_arg
 
 
@@ -22,8 +22,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    type=endpoint_arg,
                    help="Zenoh endpoint to connect to (repeatable; default tcp/127.0.0.1:7447)")
     p.add_argument("--mode", choices=("client", "peer"), default="client")
-    p.add_argument("--shovel", default="*", help="shovel ids to show (default: all)")
-    p.add_argument("--prefix", default="shovel", help="key prefix (zenoh.prefix)")
+    p.add_argument("--shovel", type=SHOVEL_OR_ALL, default="*",
+                   help="shovel id to show (default: all)")
+    p.add_argument("--prefix", type=KEY_PREFIX, default="shovel",
+                   help="key prefix (zenoh.prefix)")
     p.add_argument("--listen", default="127.0.0.1:8081", metavar="HOST:PORT",
                    help="address of the page (default 127.0.0.1:8081)")
     p.add_argument("--duration", type=SECONDS, default=None, help="exit after this many seconds")

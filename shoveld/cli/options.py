@@ -1,4 +1,4 @@
-"""argparse types for the commands' numeric options.
+"""argparse types for the commands' numeric options, and for the words of Zenoh keys.
 
 A value out of its range (a negative load, ``nan`` seconds, a machine seed of -3) is
 refused by argparse with the option named and the range expected, in one line, before
@@ -63,3 +63,30 @@ ORDER = number(2, 20, integer=True)
 """A Savitzky-Golay fit's order: 2 at least, as the model needs accelerations; at most
 20 (order 30 left the hoist's pull per ampere with a standard error of 55 %, against
 0.12 % at the default 7, on a simulated calibration)."""
+
+
+def key_chunk(pattern: str, expected: str) -> Callable[[str], str]:
+    """A type for a Zenoh key's words: ``pattern`` (a regular expression the whole text
+    must match), ``expected`` said in the refusal."""
+    import re
+
+    rx = re.compile(pattern)
+
+    def parse(text: str) -> str:
+        if not rx.fullmatch(text):
+            raise argparse.ArgumentTypeError(f"{text!r}: expected {expected}")
+        return text
+
+    return parse
+
+
+SHOVEL_ID = key_chunk(r"[A-Za-z0-9_.-]{1,64}",
+                      "1-64 letters, digits, '_', '.', '-' (a shovel's id, as shovel.id)")
+"""A shovel's id on Zenoh: one plain key chunk, as the config's ``shovel.id`` (a '/' or a
+'*' in it published under another shovel's keys, or under none a cab reads)."""
+SHOVEL_OR_ALL = key_chunk(r"[A-Za-z0-9_.-]{1,64}|\*",
+                          "a shovel's id (1-64 letters, digits, '_', '.', '-') or * for all")
+"""The shovels a screen shows: one id, or ``*``."""
+KEY_PREFIX = key_chunk(r"[A-Za-z0-9_.-]+(/[A-Za-z0-9_.-]+)*",
+                       "a plain key expression, as zenoh.prefix (e.g. shovel or site1/shovel)")
+"""The key prefix of a site's shovels, as the config's ``zenoh.prefix``."""

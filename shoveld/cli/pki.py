@@ -13,6 +13,7 @@ import json
 from pathlib import Path
 
 from shoveld.cli import CliError
+from shoveld.cli.options import KEY_PREFIX
 from shoveld.words import n_of
 
 
@@ -49,7 +50,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="tls/ endpoint to listen on (repeatable; default tls/0.0.0.0:7447)")
     r.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
                    help="another router to connect to (repeatable)")
-    r.add_argument("--prefix", default="shovel", help="the shovels' key prefix (zenoh.prefix)")
+    r.add_argument("--prefix", type=KEY_PREFIX, default="shovel",
+                   help="the shovels' key prefix (zenoh.prefix)")
     r.add_argument("-o", "--output", type=Path, default=None, help="file (default: stdout)")
     r.set_defaults(func=run_router_config)
 

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from shoveld.cli import CliError
-from shoveld.cli.options import SECONDS, SECONDS_OR_ZERO, number
+from shoveld.cli.options import SECONDS, SECONDS_OR_ZERO, SHOVEL_ID, number
 from shoveld.endpoints import endpoint_arg
 from shoveld.payload.misfit import misfit_note
 
@@ -52,8 +52,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "params.toml when neither this nor --config is given)")
     p.add_argument("--state-dir", default=None,
                    help="pass log directory (default: a temporary one, removed at the end)")
-    p.add_argument("--id", default=None, help="shovel id on Zenoh (default: the config's, "
-                   "else 'replay')")
+    p.add_argument("--id", type=SHOVEL_ID, default=None,
+                   help="shovel id on Zenoh (default: the config's, else 'replay')")
     p.add_argument("--listen", action="append", default=None, metavar="ENDPOINT",
                    type=endpoint_arg,
                    help="Zenoh listen endpoint (repeatable; default tcp/127.0.0.1:7447)")

@@ -8,7 +8,7 @@ import argparse
 import pytest
 
 from shoveld.cli import SUBCOMMANDS, build_parser
-from shoveld.cli.options import ORDER, SECONDS, number
+from shoveld.cli.options import KEY_PREFIX, ORDER, SECONDS, SHOVEL_ID, SHOVEL_OR_ALL, number
 
 
 def _parsers() -> list[tuple[str, argparse.ArgumentParser]]:
@@ -74,3 +74,38 @@ def test_the_ranges_edges() -> None:
     assert frac("0") == 0.0
     with pytest.raises(argparse.ArgumentTypeError, match="at least 0 and below 1"):
         frac("1")
+
+
+@pytest.mark.parametrize("argv,expected", [
+    # a '/' in the id published under keys no cab reads, or another shovel's
+    (["replay", "cap", "--fast", "--id", "a/b"], "--id: 'a/b': expected 1-64 letters"),
+    (["replay", "cap", "--fast", "--id", "bad id!"], "--id: 'bad id!': expected 1-64"),
+    (["cab", "--shovel", "a/b"], "--shovel: 'a/b': expected a shovel's id"),
+    (["office", "--prefix", ""], "--prefix: '': expected a plain key expression"),
+    (["cab", "--prefix", "x/**"], "--prefix: 'x/**': expected a plain key expression"),
+    (["pki", "router-config", "r", "--dir", "d", "--prefix", "a//b"],
+     "--prefix: 'a//b': expected a plain key expression"),
+])
+def test_a_key_word_that_is_not_one_is_refused_by_name(
+        argv: list[str], expected: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """The words of Zenoh keys on the command line follow the config's rules for
+    ``shovel.id`` and ``zenoh.prefix`` (until 2026-11-30, ``replay --id a/b`` and a
+    screen's ``--prefix ''`` were taken)."""
+    with pytest.raises(SystemExit) as e:
+        build_parser(argv[0]).parse_args(argv)
+    assert e.value.code == 2
+    assert expected in capsys.readouterr().err
+
+
+def test_the_key_words_edges() -> None:
+    assert SHOVEL_ID("s-1.x_2") == "s-1.x_2" and SHOVEL_ID("x" * 64) == "x" * 64
+    assert SHOVEL_OR_ALL("*") == "*" and KEY_PREFIX("site1/shovel") == "site1/shovel"
+    for bad in ("", "x" * 65, "*", "a b", "a/b"):
+        with pytest.raises(argparse.ArgumentTypeError):
+            SHOVEL_ID(bad)
+    for bad in ("**", "a*", ""):
+        with pytest.raises(argparse.ArgumentTypeError):
+            SHOVEL_OR_ALL(bad)
+    for bad in ("/shovel", "shovel/", "a//b", "$*"):
+        with pytest.raises(argparse.ArgumentTypeError):
+            KEY_PREFIX(bad)
