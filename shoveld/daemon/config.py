@@ -422,13 +422,20 @@ def _parse_tls(where: str, t: Mapping[str, Any], base_dir: Path | None) -> TlsCo
 
 
 def check_tls_files(cfg: DaemonConfig, dates: bool = True) -> list[str]:
-    """The TLS files exist, are readable and (with ``dates``) in date, and the
-    certificate is this shovel's; ConfigError names the key and file. Returns notes for
-    check-config."""
+    """The TLS files exist, are readable and (with ``dates``) in date, the certificate is
+    this shovel's and signed by the CA, the key is the certificate's and the owner's
+    only; ConfigError names the key and file. Returns notes for check-config."""
     tls = cfg.zenoh.tls
     if tls is None:
         return []
-    from shoveld.security.pki import PkiError, check_cert_dates, check_key, read_cert
+    from shoveld.security.pki import (
+        PkiError,
+        check_cert_dates,
+        check_issued_by,
+        check_key,
+        check_key_of,
+        read_cert,
+    )
 
     where = str(cfg.path) if cfg.path else "<config>"
     notes = []
@@ -447,7 +454,12 @@ def check_tls_files(cfg: DaemonConfig, dates: bool = True) -> list[str]:
                 f"{where}: key 'zenoh.tls.certificate': {info.path} is for "
                 f"{info.common_name!r} (role {info.role}), not shovel {cfg.shovel_id!r}: the "
                 f"routers let it publish only under {cfg.zenoh.prefix}/{info.common_name}/")
+        try:
+            check_issued_by(tls.certificate, tls.ca)
+        except PkiError as e:
+            raise ConfigError(f"{where}: key 'zenoh.tls.certificate': {e}") from None
         check_key(tls.key)
+        check_key_of(tls.key, tls.certificate)
     except PkiError as e:
         raise ConfigError(f"{where}: key 'zenoh.tls.key': {e}") from None
     return notes

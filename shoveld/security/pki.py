@@ -256,6 +256,45 @@ def check_key(path: str | Path) -> None:
         raise PkiError(f"{p}: not an unencrypted PEM private key ({e})") from None
 
 
+def _load_cert(path: Path) -> x509.Certificate:
+    return x509.load_pem_x509_certificate(path.read_bytes())
+
+
+def check_issued_by(certificate: str | Path, ca: str | Path) -> None:
+    """PkiError if ``certificate`` was not signed by the CA of ``ca``: every router of
+    the site refuses a certificate of another site's CA (or one made for a test), at the
+    handshake, where the daemon sees only that it cannot connect. Both files have been
+    read by :func:`read_cert`."""
+    from cryptography.exceptions import InvalidSignature
+
+    cert, ca_cert = _load_cert(Path(certificate)), _load_cert(Path(ca))
+    try:
+        cert.verify_directly_issued_by(ca_cert)
+    except (ValueError, TypeError, InvalidSignature):
+        raise PkiError(f"{certificate}: not signed by the site CA of {ca} (issued by "
+                       f"{cert.issuer.rfc4514_string()!r}); the routers would refuse it"
+                       ) from None
+
+
+def check_key_of(key: str | Path, certificate: str | Path) -> None:
+    """PkiError if ``key`` (a private key :func:`check_key` has read) is not the key of
+    ``certificate`` (every TLS handshake would fail), or if the machine's other users may
+    read or change it (who reads it can speak as this peer: owner-only, 0600, or 0640
+    with the daemon's group)."""
+    k = Path(key)
+    priv = serialization.load_pem_private_key(k.read_bytes(), None)
+    spki = serialization.Encoding.DER, serialization.PublicFormat.SubjectPublicKeyInfo
+    if (priv.public_key().public_bytes(*spki)
+            != _load_cert(Path(certificate)).public_key().public_bytes(*spki)):
+        raise PkiError(f"{k}: not the key of {certificate} (another peer's key?); every TLS "
+                       "handshake would fail")
+    mode = k.stat().st_mode & 0o777
+    if mode & 0o007:
+        raise PkiError(f"{k}: other users of this machine may read or change it (mode "
+                       f"{mode:04o}); make it owner-only: chmod 600 (or 640 with the "
+                       "daemon's group)")
+
+
 def check_cert_dates(info: CertInfo, now: dt.datetime | None = None) -> None:
     """PkiError if the certificate is expired or not valid yet."""
     t = now or _now()

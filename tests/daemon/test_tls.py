@@ -151,6 +151,17 @@ def test_check_config_names_the_tls_problem(tmp_path: Path, site: Site,
     pki.init_ca(old)
     pki.issue(old, "s1", "shovel", days=30,
               not_before=dt.datetime.now(dt.UTC) - dt.timedelta(days=40))
+    other = tmp_path / "other"  # another site's CA, and its s1
+    pki.init_ca(other)
+    pki.issue(other, "s1", "shovel")
+    loose = tmp_path / "loose.key"
+    loose.write_bytes(Path(good["key"]).read_bytes())
+    loose.chmod(0o644)
+    group = tmp_path / "group.key"
+    group.write_bytes(Path(good["key"]).read_bytes())
+    group.chmod(0o640)  # root's key, read by the daemon's group: allowed
+    rc, out = check(_config(tmp_path, {**good, "key": str(group)}, name="group.toml"))
+    assert rc == 0, out
     cases = {
         "missing certificate": ({**good, "certificate": str(tmp_path / "nope.crt")},
                                 "key 'zenoh.tls.certificate'", "nope.crt: cannot read"),
@@ -170,6 +181,16 @@ def test_check_config_names_the_tls_problem(tmp_path: Path, site: Site,
                                  "key": str(old / "s1.key")},
                                 "key 'zenoh.tls.certificate'", "expired on"),
         "unknown key": ({**good, "cert": "x"}, "key 'zenoh.tls.cert'", "not a known key"),
+        # (2026-11-30: each of these three was "OK", and the daemon then never connected,
+        # or anyone on the machine could read the shovel's key)
+        "certificate of another site's CA": (
+            {**good, "certificate": str(other / "s1.crt"), "key": str(other / "s1.key")},
+            "key 'zenoh.tls.certificate'", "not signed by the site CA of"),
+        "another certificate's key": ({**good, "key": str(other / "s1.key")},
+                                      "key 'zenoh.tls.key'", "not the key of"),
+        "key others may read": ({**good, "key": str(loose)}, "key 'zenoh.tls.key'",
+                                "other users of this machine may read or change it (mode "
+                                "0644); make it owner-only"),
     }
     for i, (case, (tls, key, why)) in enumerate(cases.items()):
         rc, err = check(_config(tmp_path, tls, name=f"c{i}.toml"))
@@ -334,6 +355,33 @@ def test_cab_straight_to_a_tls_daemon(tmp_path: Path, e2e_table: SignalsTable,
             assert f"s1 pass {n} truck" in out, out
     finally:
         svc.close()
+
+
+def test_a_screen_names_what_its_tls_files_lack(tmp_path: Path, site: Site,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """A cab's or the office's ``--tls`` is checked as the daemon's config is: another
+    site's CA, another certificate's key, a key others may read, each in one line before
+    anything connects (a handshake refuses them without saying why)."""
+    from shoveld.cli import main
+
+    other = tmp_path / "other-ca"
+    pki.init_ca(other)
+    pki.issue(other, "cab-x", "cab")
+    ca, crt, key = (str(site.dir / n) for n in ("ca.crt", "cab-s1.crt", "cab-s1.key"))
+    loose = tmp_path / "loose.key"
+    loose.write_bytes(Path(key).read_bytes())
+    loose.chmod(0o604)
+    for cmd, files, why in [
+        ("cab", [ca, str(other / "cab-x.crt"), str(other / "cab-x.key")],
+         "not signed by the site CA of"),
+        ("office", [ca, crt, str(other / "cab-x.key")], "not the key of"),
+        ("cab", [ca, crt, str(loose)], "(mode 0604)"),
+    ]:
+        assert main([cmd, "--tls", *files, "--connect", "tls/127.0.0.1:9",
+                     "--duration", "30"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith(f"shoveld {cmd}: error: --tls: "), err
+        assert why in err[0], err
 
 
 def test_daemon_with_a_foreign_certificate_never_connects(tmp_path: Path, site: Site) -> None:
