@@ -81,7 +81,7 @@ def run_issue(args: argparse.Namespace) -> int:
 
 
 def run_list(args: argparse.Namespace) -> int:
-    from shoveld.security.pki import PkiError, list_certs
+    from shoveld.security.pki import PkiError, key_words, list_certs
 
     try:
         certs = list_certs(args.dir)
@@ -89,7 +89,7 @@ def run_list(args: argparse.Namespace) -> int:
         raise CliError(str(e)) from None
     for c in certs:
         print(f"{c.common_name:20s} {c.role or '?':12s} until {c.not_after:%Y-%m-%d}  "
-              f"{c.path}")
+              f"{c.path}  ({key_words(c.path)})")
     return 0
 
 

@@ -129,7 +129,30 @@ def _load_ca(d: Path) -> tuple[x509.Certificate, ec.EllipticCurvePrivateKey]:
         raise PkiError(f"{d / CA_KEY}: cannot read the site CA: {e}") from None
     if not isinstance(key, ec.EllipticCurvePrivateKey):
         raise PkiError(f"{d / CA_KEY}: not an EC key made by 'shoveld pki init'")
+    mode = key_mode(d / CA_KEY)
+    if mode & 0o077:
+        raise PkiError(f"{d / CA_KEY}: others may read or change the site CA's key (mode "
+                       f"{mode:04o}), and whoever reads it can issue certificates for the "
+                       "site: make it owner-only (chmod 600) and think whether to make a "
+                       "new CA")
     return cert, key
+
+
+def key_mode(path: str | Path) -> int:
+    """The permission bits of a key file (0o600 as written here)."""
+    return os.stat(path).st_mode & 0o777
+
+
+def key_words(crt: Path) -> str:
+    """What ``pki list`` says of the key beside a certificate: owner-only, open to others
+    (to fix), or not here (given to its computer, as it should be)."""
+    k = crt.with_suffix(".key")
+    if not k.exists():
+        return "key not here"
+    mode = key_mode(k)
+    if mode & 0o007:
+        return f"key mode {mode:04o}: OTHER USERS MAY READ IT, chmod 600"
+    return "key owner-only" if not mode & 0o077 else f"key mode {mode:04o}"
 
 
 _LABEL_RE = re.compile(r"[A-Za-z0-9](?:[A-Za-z0-9-]{0,61}[A-Za-z0-9])?")
@@ -288,7 +311,7 @@ def check_key_of(key: str | Path, certificate: str | Path) -> None:
             != _load_cert(Path(certificate)).public_key().public_bytes(*spki)):
         raise PkiError(f"{k}: not the key of {certificate} (another peer's key?); every TLS "
                        "handshake would fail")
-    mode = k.stat().st_mode & 0o777
+    mode = key_mode(k)
     if mode & 0o007:
         raise PkiError(f"{k}: other users of this machine may read or change it (mode "
                        f"{mode:04o}); make it owner-only: chmod 600 (or 640 with the "

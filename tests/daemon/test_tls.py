@@ -66,6 +66,34 @@ def test_certificates_names_roles_and_key_modes(site: Site) -> None:
         pki.issue(site.dir, "a/b", "shovel")
 
 
+def test_pki_says_where_a_key_is_open_to_others(tmp_path: Path,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
+    """``pki list`` says of each certificate's key whether it is owner-only, open to
+    other users, or not here (handed to its computer); ``pki issue`` refuses a site CA
+    whose key others may read (whoever reads it can issue certificates for the site).
+    Until 2026-11-30 both said nothing of it."""
+    from shoveld.cli import main
+
+    d = tmp_path / "pki"
+    assert main(["pki", "init", "--dir", str(d)]) == 0
+    for name in ("s1", "s2", "cab-1"):
+        assert main(["pki", "issue", name, "--role", "cab" if "cab" in name else "shovel",
+                     "--dir", str(d)]) == 0
+    (d / "s2.key").chmod(0o644)
+    (d / "cab-1.key").rename(tmp_path / "cab-1.key")
+    capsys.readouterr()
+    assert main(["pki", "list", "--dir", str(d)]) == 0
+    lines = {ln.split()[0]: ln for ln in capsys.readouterr().out.splitlines()}
+    assert lines["s1"].endswith("(key owner-only)")
+    assert lines["s2"].endswith("(key mode 0644: OTHER USERS MAY READ IT, chmod 600)")
+    assert lines["cab-1"].endswith("(key not here)")
+    (d / "ca.key").chmod(0o640)
+    assert main(["pki", "issue", "s3", "--role", "shovel", "--dir", str(d)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "others may read or change the site CA's key (mode 0640)" in err
+    assert "\n" not in err and not (d / "s3.crt").exists()
+
+
 def test_pki_cli_one_line_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     from shoveld.cli import main
 
