@@ -19,17 +19,17 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "table) and OUT.truth.json (true payload and phase times per pass).")
     p.add_argument("--scenario", choices=("cycles", "calibration"), default="cycles")
     p.add_argument("--passes", type=COUNT, default=None,
-                   help="passes to dig (cycles; default 12)")
+                   help="passes to dig (cycles) (default: 12)")
     p.add_argument("--load", type=KG_OR_ZERO, default=None,
-                   help="known load in kg (calibration; the thesis used 8420; default 0)")
+                   help="known load in kg (calibration; the thesis used 8420) (default: 0)")
     p.add_argument("--payload-range", type=KG_OR_ZERO, nargs=2, metavar=("MIN", "MAX"),
                    default=None, help="draw each pass's payload from MIN..MAX kg")
     p.add_argument("--truck-target", type=KG, default=None,
-                   help="truck target in kg; passes fill trucks to about it (cycles; "
-                        "default 136000)")
+                   help="truck target in kg; passes fill trucks to about it (cycles) "
+                        "(default: 136000)")
     p.add_argument("--verified-fraction", type=number(0.0, 1.0), default=None,
-                   help="share of passes whose scale-verified payload is written (cycles; "
-                        "default 0)")
+                   help="share of passes whose scale-verified payload is written (cycles) "
+                        "(default: 0)")
     p.add_argument("--rate", type=number(0.0, lo_open=True, unit="Hz"), default=50.0,
                    help="logger rate in Hz")
     p.add_argument("--seed", type=SEED, default=0, help="seed of the path and the noise")
