@@ -73,3 +73,34 @@ def test_a_writable_output_goes_on_to_the_input(tmp_path: Path, garbled: Path,
                  str(tmp_path / "plots" / "cal"), str(garbled)], capsys)
     assert str(garbled) in line and "plots" not in line, line
     assert not (tmp_path / "plots").exists() and not (tmp_path / "p.toml").exists()
+
+
+def test_an_output_in_a_folder_one_may_not_write(
+        tmp_path: Path, garbled: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The permission branch: a folder its user may not write (mode 0555; as root, who
+    may write anywhere, an immutable folder, which root may not write either). Refused
+    before the work, naming the folder."""
+    import os
+    import subprocess
+
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    if os.geteuid() == 0:
+        r = subprocess.run(["chattr", "+i", str(ro)], capture_output=True, text=True)
+        if r.returncode:
+            pytest.skip(f"root, and no immutable folder here: {r.stderr.strip()}")
+    else:
+        ro.chmod(0o555)
+    try:
+        out = ro / "p.toml"
+        assert _err(["calibrate", "--out", str(out), str(garbled)], capsys) == (
+            f"shoveld calibrate: error: {out}: Permission denied (the folder {ro} is not "
+            "writable)")
+        assert _err(["diagnose", "--calib", str(garbled), "--measured", str(garbled),
+                     "--report", str(ro / "report")], capsys).endswith(
+            f"{ro / 'report'}: Permission denied (the folder {ro} is not writable)")
+    finally:
+        if os.geteuid() == 0:
+            subprocess.run(["chattr", "-i", str(ro)], check=False)
+        else:
+            ro.chmod(0o755)
