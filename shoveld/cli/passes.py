@@ -61,8 +61,12 @@ def parse_when(text: str, now: float | None = None) -> float:
     ``--since 0001-01-01``)."""
     t = _when(text, now)
     if not 0.0 <= t <= LATEST:
-        raise CliError(f"time {text!r} is outside 1970-01-01 .. 9999-12-30 (UTC)")
+        raise _outside(text)
     return t
+
+
+def _outside(text: str) -> CliError:
+    return CliError(f"time {text!r} is outside 1970-01-01 .. 9999-12-30 (UTC)")
 
 
 def _when(text: str, now: float | None) -> float:
@@ -91,7 +95,7 @@ def _when(text: str, now: float | None) -> float:
         try:
             d = d.astimezone()  # naive = local time
         except (OverflowError, ValueError):  # a date at the ends of what datetime holds
-            return -1.0
+            raise _outside(text) from None
     return d.timestamp()
 
 
