@@ -134,6 +134,9 @@ class Driver(ABC):
         self.health = DriverHealth()
         self.backoff_s = backoff_s
         self._lock = threading.Lock()
+        self._measured = 0
+        """Readings with a value in them (a Modbus poll nobody answered is a reading of
+        none): the back-off starts again only after a link that gave one."""
 
     @abstractmethod
     def open(self) -> None:
@@ -169,6 +172,8 @@ class Driver(ABC):
                 break
         self.health.messages += 1
         self.health.last_reading_t = reading.t_host
+        if reading.values:
+            self._measured += 1
         sink(reading)
 
     def run(self, sink: Sink, stop: threading.Event) -> None:
@@ -176,6 +181,7 @@ class Driver(ABC):
         delay = self.backoff_s[0]
         first = True
         while not stop.is_set():
+            measured = self._measured
             try:
                 self.open()
                 self.health.connected = True
@@ -183,10 +189,15 @@ class Driver(ABC):
                     self.health.reconnects += 1
                     log.warning("%s: reconnected", self.name)
                 first = False
-                delay = self.backoff_s[0]
                 while not stop.is_set():
                     self.read(sink)
             except Exception as e:  # noqa: BLE001 - any device fault leads to reconnect
+                if self._measured > measured:
+                    # The back-off starts again after a link that gave measurements (a new
+                    # fault), not after every open that succeeds: a device that takes the
+                    # connection and never answers (a Modbus gateway whose serial side is
+                    # dead) was retried every 0.2 s, two log lines each, for ever.
+                    delay = self.backoff_s[0]
                 self.health.connected = False
                 self.health.last_error = f"{type(e).__name__}: {e}"
                 log.error("%s: %s; retrying in %.1f s", self.name, self.health.last_error, delay)

@@ -181,6 +181,39 @@ def test_dead_module_leads_to_reconnect_and_recovery() -> None:
                             and not run.readings[-1].invalid, 5)
 
 
+def test_a_module_that_takes_the_link_and_never_answers_is_retried_less_and_less(
+        caplog: pytest.LogCaptureFixture) -> None:
+    """A module (or a TCP gateway whose serial side is dead) that accepts the connection
+    and answers no poll: each open succeeds, so until 2026-11-30 the back-off started
+    again at every open and the driver reconnected every 0.2 s for ever, two log lines
+    each. The back-off now starts again only after a link that gave a measurement: it
+    doubles up to its ceiling; once the module answers, the next fault starts from the
+    floor again."""
+    import logging
+    import re
+
+    def delays() -> list[float]:
+        return [float(m.group(1)) for r in caplog.records
+                if (m := re.search(r"retrying in ([0-9.]+) s", r.getMessage()))]
+
+    with caplog.at_level(logging.ERROR, logger="drivers.base"), \
+            ModbusAdcEmulator(lambda t: VALUES, CHANNELS) as emu:
+        emu.silent = True
+        drv = ModbusAdcDriver.from_config(
+            "adc", emu.driver_config(poll_hz=100, timeout_s=0.05, reconnect_after=3),
+            backoff_s=(0.1, 0.8))
+        with DriverRunner(drv) as run:
+            assert run.wait_for(lambda: len(delays()) >= 5, 10)
+            assert delays()[:5] == [0.1, 0.2, 0.4, 0.8, 0.8], delays()
+            assert drv.health.reconnects >= 4 and not any(r.values for r in run.readings)
+            emu.silent = False
+            assert run.wait_for(lambda: run.readings and run.readings[-1].values, 10)
+            n = len(delays())
+            emu.silent = True
+            assert run.wait_for(lambda: len(delays()) > n, 10)
+            assert delays()[n] == 0.1, delays()
+
+
 def test_connection_refused_is_a_clear_error() -> None:
     from drivers.base import DeviceError
 
