@@ -407,8 +407,10 @@ def _check_zenoh_extra(where: str, extra: Mapping[str, Any]) -> None:
         try:
             c.insert_json5(k, json.dumps(v))
         except Exception as e:  # noqa: BLE001 - zenoh.ZError
-            raise ConfigError(f"{where}: key 'zenoh.config.{k}': Zenoh refuses it ({e})"
-                              ) from None
+            from shoveld.daemon.publisher import zenoh_words
+
+            raise ConfigError(f"{where}: key 'zenoh.config.{k}': Zenoh refuses it "
+                              f"({zenoh_words(e)})") from None
 
 
 def _parse_tls(where: str, t: Mapping[str, Any], base_dir: Path | None) -> TlsConfig:

@@ -17,12 +17,23 @@ from __future__ import annotations
 import json
 import logging
 import math
+import re
 import threading
 import time
 from collections.abc import Callable
 from typing import Any
 
 from shoveld.daemon.config import TlsConfig, ZenohConfig
+
+_RUST_PLACE = re.compile(r"\s+at\s+\S+\.rs:\d+\.?\s*$")
+
+
+def zenoh_words(e: BaseException) -> str:
+    """A Zenoh error as mine IT reads it in the log: without the Rust source file and
+    line its text ends with (``... at /root/.cargo/git/checkouts/zenoh-.../src/net/
+    runtime/orchestrator.rs:447.``), which says nothing to them."""
+    return _RUST_PLACE.sub("", str(e).strip()) or type(e).__name__
+
 
 log = logging.getLogger(__name__)
 
@@ -132,8 +143,9 @@ class Publisher:
                 session = zenoh.open(zenoh_config(c.mode, c.listen, c.connect,
                                                   c.multicast_scouting, c.extra, c.tls, c.acl))
             except Exception as e:  # noqa: BLE001 - zenoh.ZError and config errors
-                self.last_error = f"zenoh open: {e}"
-                log.warning("zenoh: cannot open session (%s); retrying in %.1f s", e, delay)
+                self.last_error = f"zenoh open: {zenoh_words(e)}"
+                log.warning("zenoh: cannot open session (%s); retrying in %.1f s",
+                            zenoh_words(e), delay)
                 if self._stop.wait(delay):
                     return
                 delay = min(2 * delay, self.retry_s[1])
