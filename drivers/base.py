@@ -114,6 +114,22 @@ class DeviceError(RuntimeError):
     """A device fault worth a clear message (wrong baud rate, no answer, Error message)."""
 
 
+def port_error_words(e: BaseException) -> str:
+    """Why a serial port did not open, once: pyserial's text repeats the port twice
+    ("could not open port X: [Errno 2] No such file or directory: 'X'") after the
+    driver's own "cannot open ... port X"; a permission refused says what gives it."""
+    import errno
+    import os
+
+    n = getattr(e, "errno", None)
+    if n == errno.EACCES or n == errno.EPERM:
+        return (f"{os.strerror(n)} (the daemon's user needs the group of the port, "
+                "dialout, and the unit's DeviceAllow its kind of device)")
+    if isinstance(n, int) and n > 0:
+        return os.strerror(n)
+    return str(e)
+
+
 Sink = Callable[[Reading], None]
 
 TickHint = Callable[[], "tuple[float, float] | None"]

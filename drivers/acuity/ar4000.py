@@ -49,7 +49,15 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, fields
 from typing import Any
 
-from drivers.base import TARGETS_TAKEN, DeviceError, Driver, Reading, Sink, check_keys
+from drivers.base import (
+    TARGETS_TAKEN,
+    DeviceError,
+    Driver,
+    Reading,
+    Sink,
+    check_keys,
+    port_error_words,
+)
 from drivers.capture.clock import clock_wait_until
 from drivers.capture.tap import ByteTap, SerialFactory, open_serial
 from drivers.serialio import direct_reader
@@ -412,7 +420,8 @@ class Ar4000Driver(Driver):
             self._ser = open_serial(cfg.port, cfg.baudrate, cfg.read_timeout_s, self.tap,
                                     **extra)
         except Exception as e:  # noqa: BLE001 - pyserial raises OSError/SerialException
-            raise DeviceError(f"cannot open AR4000 port {cfg.port}: {e}") from e
+            raise DeviceError(f"cannot open AR4000 port {cfg.port}: {port_error_words(e)}"
+                              ) from e
         self._splitter.clear()
         self._pending.clear()
         # A new connection: the lines before it are not the line before the next one,

@@ -41,7 +41,7 @@ from typing import Any
 
 import serial
 
-from drivers.base import DeviceError, Driver, Reading, Sink, check_keys
+from drivers.base import DeviceError, Driver, Reading, Sink, check_keys, port_error_words
 from drivers.serialio import direct_reader
 from drivers.xsens.mtdata2 import (
     FRAME_BY_NAME,
@@ -341,7 +341,8 @@ class MtiSerialDriver(Driver):
             self._ser.reset_input_buffer()
         except (OSError, serial.SerialException, ValueError) as e:
             self._ser = None
-            raise DeviceError(f"cannot open MTi port {self.port}: {e}") from e
+            raise DeviceError(f"cannot open MTi port {self.port}: {port_error_words(e)}"
+                              ) from e
         self._direct = direct_reader(self._ser)
         self._parser.reset()
         self._command(MID.GOTO_CONFIG, b"", MID.GOTO_CONFIG_ACK, retries=4)

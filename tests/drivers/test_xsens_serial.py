@@ -12,6 +12,7 @@ import math
 import threading
 import time
 from collections.abc import Callable, Iterator
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -285,9 +286,30 @@ def test_wrong_baud_rate_gives_a_clear_error(device_state: str) -> None:
 
 
 def test_unopenable_port() -> None:
+    """Said once: pyserial's own text named the port twice more after the driver's."""
     drv = make_driver("/nonexistent/ttyMTI")
-    with pytest.raises(DeviceError, match="cannot open MTi port /nonexistent/ttyMTI"):
+    with pytest.raises(DeviceError) as e:
         drv.open()
+    assert str(e.value) == "cannot open MTi port /nonexistent/ttyMTI: No such file or directory"
+
+
+def test_a_port_the_user_may_not_open_says_what_gives_it(tmp_path: Path) -> None:
+    """A permission refused (the daemon's user not in dialout) says what gives it (the
+    words checked on the error itself: these tests run as root, whom no port refuses);
+    any other reason is said once, as for a folder given as the port."""
+    import errno
+
+    from drivers.base import port_error_words
+
+    err = OSError(errno.EACCES, "Permission denied")
+    assert port_error_words(err) == ("Permission denied (the daemon's user needs the group "
+                                     "of the port, dialout, and the unit's DeviceAllow its "
+                                     "kind of device)")
+    drv = make_driver(str(tmp_path))
+    with pytest.raises(DeviceError) as e:
+        drv.open()
+    assert str(e.value).startswith(f"cannot open MTi port {tmp_path}: ")
+    assert "could not open port" not in str(e.value)
 
 
 @pytest.mark.parametrize("cfg,key", [
