@@ -46,7 +46,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     mode.add_argument("--fast", action="store_true", help="as fast as possible, deterministic")
     p.add_argument("--config", default=None,
                    help="daemon config for params, loop, engine, truck and Zenoh settings "
-                        "(its devices are ignored: the capture's are used)")
+                        "(its devices are ignored: the capture's are used; a wrong key in them is "
+                        "still named)")
     p.add_argument("--params", default=None,
                    help="params file (overrides the config's; default: the capture folder's "
                         "params.toml when neither this nor --config is given)")
@@ -87,7 +88,9 @@ def build_config(args: argparse.Namespace, state_dir: Path) -> tuple[DaemonConfi
                        + ": expected a capture folder (its manifest.json and recordings)")
     try:
         if args.config:
-            cfg = load_config(args.config, check_drivers=False, require_devices=False)
+            # its devices are checked key by key (a config with a wrong one is wrong
+            # wherever it is used), not for covering the payload: the capture's are used
+            cfg = load_config(args.config, require_devices=False)
         else:
             if not args.params:
                 own = Path(args.capture) / "params.toml"

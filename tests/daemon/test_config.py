@@ -180,3 +180,26 @@ def test_check_config_says_when_the_calibrations_passes_fit_worse_than_its_trial
             "3.6 times): above 1.5, the model lacks something this machine does in "
             "operation (a swing, a slope), which the misfit will not mark; shoveld "
             "diagnose names it"] if warned else []), out
+
+
+def test_replay_takes_a_config_whose_devices_it_ignores(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``replay --config`` uses the capture's devices: the config's need not cover the
+    payload (it was refused with the coverage's message), but a wrong key in them is
+    still named, as it is wrong wherever the config is used. The daemon, which reads
+    those devices, still refuses a config that does not cover the payload."""
+    from .conftest import CAPTURE, free_port
+
+    partial = tmp_path / "partial.toml"
+    partial.write_text(f'[shovel]\nid = "x"\nparams = "{PARAMS}"\nstate_dir = "{tmp_path}"\n'
+                       '[devices.laser]\nkind = "ar4000"\nport = "/dev/ttyUSB9"\n')
+    argv = ["replay", str(CAPTURE), "--fast", "--until", "20", "--listen",
+            f"tcp/127.0.0.1:{free_port()}", "--config"]
+    assert main([*argv, str(partial)]) == 0, capsys.readouterr().err
+    capsys.readouterr()
+    with pytest.raises(ConfigError, match="no device provides"):
+        load_config(partial)
+    broken = tmp_path / "broken.toml"
+    broken.write_text(partial.read_text().replace('port = "/dev/ttyUSB9"\n', ""))
+    assert main([*argv, str(broken)]) == 2
+    assert "[devices.laser]: ar4000: key 'port' is required" in capsys.readouterr().err
