@@ -137,6 +137,17 @@ def run(args: argparse.Namespace) -> int:
     if not _port_free(args.port):
         raise CliError(f"127.0.0.1:{args.port} is in use (another demo or daemon?); "
                        "use --port")
+    # the inputs named on the command line, before the calibration and the simulation (a
+    # --params that is not there was named in the demo's own temporary config, a
+    # --state-dir that is a file ended in a traceback at the daemon's start)
+    if args.params:
+        from shoveld.cli.common import read_params
+
+        read_params(args.params)
+    if args.state_dir:
+        from shoveld.cli.common import check_output
+
+        check_output(args.state_dir, folder=True)
     setup_logging("INFO" if args.verbose else "ERROR")
     out = sys.stdout
     tty = out.isatty() and not args.lines

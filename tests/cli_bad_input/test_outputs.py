@@ -104,3 +104,21 @@ def test_an_output_in_a_folder_one_may_not_write(
             subprocess.run(["chattr", "-i", str(ro)], check=False)
         else:
             ro.chmod(0o755)
+
+
+def test_the_demo_names_its_inputs_before_its_work(tmp_path: Path, garbled: Path,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """``demo --params`` that is not there was named in the demo's own temporary config
+    (``/tmp/shoveld-demo-.../shoveld.toml: key 'shovel.params': ...``), after the
+    simulation; a ``--state-dir`` that is a file ended in a traceback at the daemon's
+    start. Both are said first, naming what was given."""
+    import socket
+
+    with socket.socket() as sk:
+        sk.bind(("127.0.0.1", 0))
+        port = str(sk.getsockname()[1])
+    missing = tmp_path / "nope.toml"
+    assert _err(["demo", "--port", port, "--params", str(missing)], capsys) == (
+        f"shoveld demo: error: {missing}: cannot read: No such file or directory")
+    assert _err(["demo", "--port", port, "--state-dir", str(garbled)], capsys).endswith(
+        f"{garbled}: Not a directory (a file is there; expected a folder)")
