@@ -124,6 +124,7 @@ def _port_free(port: int) -> bool:
 
 def run(args: argparse.Namespace) -> int:
     import dataclasses
+    import sqlite3
 
     from drivers.capture.clock import ReplayClock
     from hil_fixtures.virtual_shovel import VirtualShovel
@@ -184,7 +185,11 @@ def run(args: argparse.Namespace) -> int:
                   f"(also try: shoveld cab --connect tcp/127.0.0.1:{args.port})", flush=True)
             print(f"playing {duration:.0f} s of shovel time at {args.speed:g}x "
                   f"(ready in {time.monotonic() - t0:.0f} s)", flush=True)
-            service.start(zenoh_wait_s=5.0)
+            try:
+                service.start(zenoh_wait_s=5.0)
+            except (OSError, sqlite3.Error) as e:  # as run and replay say it
+                service.close()
+                raise CliError(f"cannot open the pass log in {cfg.state_dir}: {e}") from None
             stop = threading.Event()
             end_t = clock.now() + duration + 1.0
             loop = threading.Thread(target=service.run, args=(stop, lambda: clock.now() >= end_t),
