@@ -94,6 +94,15 @@ def decode_mti(src: BinaryIO, out: TextIO, err: TextIO, args: argparse.Namespace
         if lines:
             out.write("\n".join(lines) + "\n")
     parser.finish()
+    if n_msgs == 0:
+        # a wrong file (a capture's JSON lines, a laser's log) said so, not "0 messages"
+        # and success
+        name = getattr(src, "name", "-")
+        name = "stdin" if not isinstance(name, str) or name == "<stdin>" else name
+        got = (n_of(parser.rejected_bytes, "byte", "bytes") + " and not one Xbus message"
+               if parser.rejected_bytes else "no byte")
+        raise CliError(f"{name}: {got}: expected an Xsens MTi's raw byte stream (of a "
+                       "capture, the bytes of its rx lines' hex)")
     print(f"decode mti: {n_of(n_msgs, 'message', 'messages')} ({n_data} MTData2), "
           f"{n_of(parser.rejected_bytes, 'rejected byte', 'rejected bytes')}, "
           f"{n_of(parser.bad_frames, 'bad frame', 'bad frames')}", file=err)

@@ -90,7 +90,7 @@ def _when(text: str, now: float | None) -> float:
         d = dt.datetime.fromisoformat(s)
     except ValueError:
         raise CliError(f"cannot read time {text!r}: use e.g. 2026-11-21T18:00, 2026-11-21, "
-                       "12h, yesterday, or Unix seconds") from None
+                       "12h, yesterday, or Unix seconds of 9 digits or more") from None
     if d.tzinfo is None:
         try:
             d = d.astimezone()  # naive = local time

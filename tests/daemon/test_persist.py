@@ -133,6 +133,9 @@ def test_parse_when() -> None:
     assert parse_when("2026-11-21T18:00:00+00:00", now) == 1795284000.0
     with pytest.raises(Exception, match="cannot read time"):
         parse_when("yesterday-ish", now)
+    # "Unix seconds" said with what they must look like: "0" was refused under that name
+    with pytest.raises(Exception, match="or Unix seconds of 9 digits or more"):
+        parse_when("0", now)
     # today / yesterday: local midnight, a day apart, the first not after now
     today, yesterday = parse_when("today", now), parse_when("yesterday", now)
     assert 0 <= now - today < 86400 and 82800 <= today - yesterday <= 90000

@@ -58,3 +58,24 @@ def test_every_key_any_precision_from_stdin(monkeypatch: pytest.MonkeyPatch,
 def test_missing_file_is_a_one_line_error(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["decode", "mti", "/nonexistent.bin"]) == 2
     assert "cannot read /nonexistent.bin" in capsys.readouterr().err
+
+
+def test_a_file_with_no_xbus_message_is_an_error(tmp_path, capsys: pytest.CaptureFixture[str]
+                                                 ) -> None:
+    """A wrong file (here a capture's JSON lines, which hold the stream as hex) or an
+    empty one said "0 messages" and exited 0 (until 2026-11-30): now one line, exit 2."""
+    from pathlib import Path
+
+    capture = (Path(__file__).resolve().parents[2] / "hil_fixtures" / "captures"
+               / "daemon-e2e" / "mti.serial.jsonl")
+    assert main(["decode", "mti", str(capture)]) == 2
+    out = capsys.readouterr()
+    assert out.out == ""
+    assert out.err.strip() == (f"shoveld decode: error: {capture}: "
+                               f"{capture.stat().st_size} bytes and not one Xbus message: "
+                               "expected an Xsens MTi's raw byte stream (of a capture, the "
+                               "bytes of its rx lines' hex)")
+    empty = tmp_path / "empty.bin"
+    empty.write_bytes(b"")
+    assert main(["decode", "mti", str(empty)]) == 2
+    assert f"{empty}: no byte:" in capsys.readouterr().err
