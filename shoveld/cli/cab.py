@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import shutil
 import sys
 import threading
@@ -30,6 +31,8 @@ from shoveld.words import n_of
 
 if TYPE_CHECKING:
     from shoveld.daemon.config import TlsConfig
+
+log = logging.getLogger("shoveld.cab")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -141,6 +144,15 @@ def _load(t: dict[str, Any]) -> str:
     return f"{passes}, {least}{t.get('total_kg') or 0:.0f} of {t.get('target_kg') or 0:.0f} kg"
 
 
+def _weight(m: dict[str, Any]) -> str | None:
+    """A valid estimate's "31027 kg +- 91 kg" (its spread left out if not sent); None
+    for one not valid or without a payload."""
+    p, s = m.get("payload_kg"), m.get("std_kg")
+    if not m.get("valid") or p is None:
+        return None
+    return f"{p:.0f} kg" + (f" +- {s:.0f} kg" if s is not None else "")
+
+
 def _kg(x: Any) -> str:
     return "     --" if x is None else f"{x:7.0f}"
 
@@ -168,6 +180,17 @@ class CabState:
         """Line-mode output waiting to be printed."""
         self._last_phase: dict[str, str] = {}
         self.closed_trucks = 0
+        self.bad_messages: dict[str, int] = {}
+        """Per shovel, the messages refused for a field of another kind (or not JSON)."""
+
+    def on_bad_message(self, shovel: str, topic: str, problem: str) -> None:
+        """A message the screens cannot take: counted, and said in the log the first
+        time for its shovel and every hundredth after (not one line each)."""
+        with self.lock:
+            n = self.bad_messages[shovel] = self.bad_messages.get(shovel, 0) + 1
+        if n == 1 or n % 100 == 0:
+            log.warning("%s: %s from shovel %s refused (%s); %d so far", topic,
+                        "message" if topic != "status" else "answer", shovel, problem, n)
 
     def view(self, shovel: str) -> ShovelView:
         v = self.shovels.get(shovel)
@@ -186,18 +209,16 @@ class CabState:
                 ph = msg.get("phase", "?")
                 if self._last_phase.get(shovel) != ph:
                     self._last_phase[shovel] = ph
-                    val = (f"{msg['payload_kg']:.0f} kg +- {msg['std_kg']:.0f} kg"
-                           f"{_live_doubt(msg)}"
-                           if msg.get("valid") and msg.get("payload_kg") is not None
-                           else "no valid estimate")
+                    w = _weight(msg)
+                    val = f"{w}{_live_doubt(msg)}" if w else "no valid estimate"
                     self.lines.append(f"{stamp} {shovel} {ph:7s} live {val}")
             elif topic == "pass":
                 if not any(p.get("pass") == msg.get("pass") for p in v.passes):
                     if v.truck and v.truck.get("truck") != msg.get("truck"):
                         v.passes = []
                     v.passes.append(msg)
-                val = (f"{msg['payload_kg']:.0f} kg +- {msg['std_kg']:.0f} kg" if msg.get("valid")
-                       else f"INVALID ({msg.get('reason')})")
+                val = _weight(msg) or ("INVALID" + (f" ({r})" if (r := msg.get("reason"))
+                                                    else ""))
                 self.lines.append(f"{stamp} {shovel} pass {msg.get('pass')} truck "
                                   f"{msg.get('truck')}: {val}{_doubt(msg)}")
             elif topic == "truck":
@@ -354,6 +375,7 @@ class CabClient:
                  tls: TlsConfig | None = None, topics: frozenset[str] = TOPICS) -> None:
         import zenoh
 
+        from shoveld.daemon.messages import message_problem
         from shoveld.daemon.publisher import zenoh_config
 
         self.state = state
@@ -371,6 +393,11 @@ class CabClient:
             try:
                 msg = json.loads(sample.payload.to_bytes())
             except ValueError:
+                state.on_bad_message(key[n], topic, "not JSON")
+                return
+            problem = message_problem(msg)
+            if problem is not None:
+                state.on_bad_message(key[n], topic, problem)
                 return
             state.on_message(key[n], topic, msg)
 
@@ -392,6 +419,8 @@ class CabClient:
 
     def query_status(self, timeout: float = 2.0, shovel: str | None = None) -> int:
         """Ask ``status`` of one shovel (default: the ones shown); returns the answers."""
+        from shoveld.daemon.messages import status_problem
+
         n = 0
         key = f"{self.prefix}/{shovel or self.shovel}/status"
         try:
@@ -405,6 +434,11 @@ class CabClient:
             try:
                 st = json.loads(reply.ok.payload.to_bytes())
             except ValueError:
+                self.state.on_bad_message(key[self._n], "status", "not JSON")
+                continue
+            problem = status_problem(st)
+            if problem is not None:
+                self.state.on_bad_message(key[self._n], "status", problem)
                 continue
             self.state.on_status(key[self._n], st)
             n += 1

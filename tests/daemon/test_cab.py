@@ -211,3 +211,79 @@ def test_a_late_status_answer_keeps_newer_passes_of_its_truck() -> None:
     state.on_status("s7", {"truck": {"truck": 5, "passes": 0, "total_kg": 0.0},
                            "truck_passes": []})
     assert v.passes == [] and v.truck["truck"] == 5
+
+
+def test_a_message_of_another_shape_is_refused_and_counted(caplog) -> None:
+    """A pass, truck, live estimate or health whose field the screens read has another
+    kind (another daemon version, a bug): until 2026-11-30 it reached the cab's
+    formatting and ended in a traceback in Zenoh's callback ("Unknown format code 'f'
+    for object of type 'str'"), or was shown ("pass a truck None"). Over a real Zenoh
+    session: each such message is refused and counted, said once in the log, and the
+    good pass after them is shown."""
+    import json
+    import logging
+
+    import zenoh
+
+    from shoveld.cli.cab import CabClient
+    from shoveld.daemon.publisher import zenoh_config
+
+    from .conftest import wait_for
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    peer = zenoh.open(zenoh_config("peer", (endpoint,), ()))
+    state = CabState()
+    bad = [("pass", b"not json"),
+           ("pass", {"pass": "a", "truck": 1, "payload_kg": "heavy", "valid": True}),
+           ("truck", [1, 2]),
+           ("truck", {"truck": 1, "passes": 2, "total_kg": "y", "target_kg": 136000.0}),
+           ("payload/live", {"phase": "lift", "payload_kg": 1.0, "std_kg": 1.0, "valid": "yes"}),
+           ("pass", {"pass": 2, "truck": 1, "payload_kg": 1.0, "std_kg": 1.0, "valid": True,
+                     "end": 1e300}),
+           ("health", {"problems": "none"})]
+    good = {"pass": 3, "truck": 1, "payload_kg": 31027.4, "std_kg": 91.1, "valid": True,
+            "reason": "", "end": 1795318899.5}
+    with caplog.at_level(logging.WARNING):
+        cab = CabClient(state, [endpoint], "client", "x")
+        try:
+            assert wait_for(lambda: bool(cab.session.info.routers_zid()
+                                         or cab.session.info.peers_zid()), 10)
+            for topic, msg in [*bad, ("pass", good)]:
+                peer.put(f"shovel/x/{topic}",
+                         msg if isinstance(msg, bytes) else json.dumps(msg).encode())
+            assert wait_for(lambda: any(p.get("pass") == 3 for p in state.view("x").passes), 10)
+        finally:
+            cab.close()
+            peer.close()
+    assert state.bad_messages == {"x": len(bad)}
+    assert [p["pass"] for p in state.view("x").passes] == [3]
+    assert not [r for r in caplog.records if r.name.startswith("zenoh")], caplog.text
+    refused = [r.getMessage() for r in caplog.records if r.name == "shoveld.cab"]
+    assert refused == ["pass: message from shovel x refused (not JSON); 1 so far"], refused
+    assert "x pass 3 truck 1: 31027 kg +- 91 kg" in "\n".join(state.lines)
+
+
+def test_the_shapes_the_screens_take() -> None:
+    from shoveld.daemon.messages import message_problem, status_problem
+
+    good = {"pass": 1, "truck": 1, "payload_kg": -120.5, "std_kg": 80.0, "valid": True,
+            "reason": "", "misfit": None, "end": 1795318899.5, "extra": {"any": "thing"}}
+    assert message_problem(good) is None
+    assert message_problem({**good, "valid": 1}) == "key 'valid' is 1, not true or false"
+    assert message_problem({**good, "pass": -1}) == ("key 'pass' is -1, not a whole number, "
+                                                    "0 or more")
+    assert message_problem({**good, "truck": True}).startswith("key 'truck' is True")
+    assert message_problem({**good, "end": 1e300}).endswith("a time from 1970 to 9999 "
+                                                            "(Unix seconds)")
+    assert message_problem("x" * 100) == "a JSON str where an object was expected"
+    assert message_problem({"reason": "r" * 100}) is None
+    long = repr(["r" * 100])  # said in 40 characters at most
+    assert message_problem({"reason": ["r" * 100]}) == (f"key 'reason' is {long[:37]}..., "
+                                                        "not a text")
+    st = {"truck": {"truck": 2, "passes": 1, "total_kg": 9.0}, "truck_passes": [good]}
+    assert status_problem(st) is None
+    assert status_problem({**st, "truck": {"truck": "2"}}) == ("its truck: key 'truck' is '2', "
+                                                               "not a whole number, 0 or more")
+    assert status_problem({**st, "truck_passes": [good, {"payload_kg": "x"}]}) == (
+        "its pass 2: key 'payload_kg' is 'x', not a finite number")
+    assert status_problem({**st, "truck_passes": 3}) == "key 'truck_passes' is not a list"
