@@ -70,13 +70,18 @@ def message_problem(msg: Any) -> str | None:
 
 def status_problem(st: Any) -> str | None:
     """:func:`message_problem` of a ``status`` answer's parts the screens read: its
-    truck and each of the truck's passes (its own ``truck`` key is the truck's object,
-    not its number)."""
+    truck, each of the truck's passes, its live estimate and its problems (its own
+    ``truck`` key is the truck's object, not its number)."""
     if not isinstance(st, dict):
         return f"a JSON {type(st).__name__} where an object was expected"
     truck = st.get("truck")
     if truck is not None and (p := message_problem(truck)) is not None:
         return f"its truck: {p}"
+    live = st.get("live")
+    if live is not None and (p := message_problem(live)) is not None:
+        return f"its live estimate: {p}"
+    if (expected := _kind_ok("problems", st.get("problems"))) is not None:
+        return f"key 'problems' is not {expected}"
     passes = st.get("truck_passes")
     if passes is None:
         return None

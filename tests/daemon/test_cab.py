@@ -287,3 +287,7 @@ def test_the_shapes_the_screens_take() -> None:
     assert status_problem({**st, "truck_passes": [good, {"payload_kg": "x"}]}) == (
         "its pass 2: key 'payload_kg' is 'x', not a finite number")
     assert status_problem({**st, "truck_passes": 3}) == "key 'truck_passes' is not a list"
+    assert status_problem({**st, "live": {"valid": "yes"}}) == (
+        "its live estimate: key 'valid' is 'yes', not true or false")
+    assert status_problem({**st, "problems": "none"}) == ("key 'problems' is not a list of "
+                                                          "texts")
