@@ -10,7 +10,10 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 from collections.abc import Callable
+
+from shoveld import keys
 
 
 def _range_words(lo: float | None, hi: float | None, lo_open: bool, hi_open: bool,
@@ -65,12 +68,9 @@ ORDER = number(2, 20, integer=True)
 0.12 % at the default 7, on a simulated calibration)."""
 
 
-def key_chunk(pattern: str, expected: str) -> Callable[[str], str]:
-    """A type for a Zenoh key's words: ``pattern`` (a regular expression the whole text
-    must match), ``expected`` said in the refusal."""
-    import re
-
-    rx = re.compile(pattern)
+def key_chunk(rx: re.Pattern[str], expected: str) -> Callable[[str], str]:
+    """A type for a Zenoh key's words: ``rx`` (one of :mod:`shoveld.keys`, which the whole
+    text must match), ``expected`` said in the refusal."""
 
     def parse(text: str) -> str:
         if not rx.fullmatch(text):
@@ -80,13 +80,13 @@ def key_chunk(pattern: str, expected: str) -> Callable[[str], str]:
     return parse
 
 
-SHOVEL_ID = key_chunk(r"[A-Za-z0-9_.-]{1,64}",
+SHOVEL_ID = key_chunk(keys.NAME,
                       "1-64 letters, digits, '_', '.', '-' (a shovel's id, as shovel.id)")
 """A shovel's id on Zenoh: one plain key chunk, as the config's ``shovel.id`` (a '/' or a
 '*' in it published under another shovel's keys, or under none a cab reads)."""
-SHOVEL_OR_ALL = key_chunk(r"[A-Za-z0-9_.-]{1,64}|\*",
+SHOVEL_OR_ALL = key_chunk(re.compile(rf"{keys.NAME.pattern}|\*"),
                           "a shovel's id (1-64 letters, digits, '_', '.', '-') or * for all")
 """The shovels a screen shows: one id, or ``*``."""
-KEY_PREFIX = key_chunk(r"[A-Za-z0-9_.-]+(/[A-Za-z0-9_.-]+)*",
+KEY_PREFIX = key_chunk(keys.PREFIX,
                        "a plain key expression, as zenoh.prefix (e.g. shovel or site1/shovel)")
 """The key prefix of a site's shovels, as the config's ``zenoh.prefix``."""

@@ -12,13 +12,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import re
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from shoveld import keys
 from shoveld.cycle.phases import PhaseConfig
 from shoveld.endpoints import endpoint_error
 from shoveld.engine.loop import NEEDED, EngineConfig
@@ -37,10 +37,6 @@ DEVICE_SIGNALS = tuple(c for c in SIGNAL_FIELDS if c not in ("time_s", "payload_
 
 DAEMON_DEVICE_KEYS = ("max_age_s", "enabled")
 """Keys of ``[devices.<name>]`` the daemon reads itself; all others go to the driver."""
-
-_ID_RE = re.compile(r"[A-Za-z0-9_.-]+")
-"""A shovel id must be one plain Zenoh key-expression chunk."""
-
 
 class ConfigError(ValueError):
     """A configuration the daemon will not run with; the message names file and key."""
@@ -302,7 +298,7 @@ def parse_devices(where: str, devs: Any, default_max_age: float,
     for name, d in devs.items():
         if not isinstance(d, Mapping):
             raise ConfigError(f"{where}: key 'devices.{name}' must be a table")
-        if not _ID_RE.fullmatch(name):
+        if not keys.CHUNK.fullmatch(name):
             raise ConfigError(f"{where}: key 'devices.{name}': device names may only use "
                               "letters, digits, '_', '.', '-'")
         kind = d.get("kind")
@@ -477,7 +473,7 @@ def parse_config(doc: Mapping[str, Any], where: str = "<config>",
     top = _Reader(where, doc, "")
     sh = _Reader(where, top.table("shovel"), "shovel.")
     shovel_id = sh.string("id", "shovel")
-    if not _ID_RE.fullmatch(shovel_id) or len(shovel_id) > 64:
+    if not keys.NAME.fullmatch(shovel_id):
         raise sh.fail("id", f"may only use 1-64 letters, digits, '_', '.', '-' (it is a Zenoh "
                             f"key chunk and the common name of its certificate), got "
                             f"{shovel_id!r}")
@@ -512,7 +508,7 @@ def parse_config(doc: Mapping[str, Any], where: str = "<config>",
     if mode == "client" and not connect:
         raise zr.fail("connect", "is required in client mode (the site's router endpoints)")
     prefix = zr.string("prefix", "shovel")
-    if not re.fullmatch(r"[A-Za-z0-9_.-]+(/[A-Za-z0-9_.-]+)*", prefix):
+    if not keys.PREFIX.fullmatch(prefix):
         raise zr.fail("prefix", f"must be a plain key expression, got {prefix!r}")
     zc = ZenohConfig(mode=mode, listen=listen, connect=connect,
                      multicast_scouting=zr.boolean("multicast_scouting", False),

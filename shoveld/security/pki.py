@@ -22,12 +22,11 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
+from shoveld import keys
+
 ROLES = ("shovel", "cab", "office", "maintenance", "router")
 """Who a certificate is for; the router's access control grants by role."""
 
-NAME_RE = re.compile(r"[A-Za-z0-9_.-]{1,64}")
-"""A peer's name is a file name, its certificate's common name (at most 64 characters in
-X.509) and, for a shovel, one Zenoh key chunk."""
 
 DEFAULT_HOSTS = ("localhost", "127.0.0.1", "::1")
 CA_CERT = "ca.crt"
@@ -185,7 +184,7 @@ def issue(directory: str | Path, name: str, role: str, hosts: tuple[str, ...] = 
     (0600) in ``directory``. Its SANs are localhost, 127.0.0.1, ::1 and ``hosts`` (the
     addresses others dial it at, for a router or a listening shovel)."""
     d = Path(directory)
-    if not NAME_RE.fullmatch(name) or name in ("ca",):
+    if not keys.NAME.fullmatch(name) or name in ("ca",):
         raise PkiError(f"name {name!r}: use 1-64 letters, digits, '_', '.', '-' (not 'ca'); "
                        "for a shovel, its shovel.id")
     if role not in ROLES:
