@@ -33,8 +33,6 @@ def run(args: argparse.Namespace) -> int:
     from drivers.capture.recorder import RecordConfigError, Recorder, load_record_config
     from shoveld.cli import CliError
 
-    if args.duration is not None and not args.duration > 0:
-        raise CliError("--duration must be > 0 seconds")
     try:
         config = load_record_config(args.config)
         rec = Recorder(config, args.out, overwrite=args.overwrite, where=args.config)
