@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from shoveld.cli import CliError
+from shoveld.daemon.messages import LATEST
 from shoveld.payload.misfit import misfit_note
 
 
@@ -47,11 +48,6 @@ def add_log_window(p: argparse.ArgumentParser) -> None:
                         "seconds, 12h / 30m / 2d back from now, today or yesterday "
                         "(default: the whole log)")
     p.add_argument("--until", default=None, metavar="WHEN", help="... and before WHEN")
-
-
-LATEST = dt.datetime(9999, 12, 30, tzinfo=dt.UTC).timestamp()
-"""The last time a pass log's dates can be written for (a day short of year 9999's end,
-for any time zone)."""
 
 
 def parse_when(text: str, now: float | None = None) -> float:

@@ -21,8 +21,10 @@ NUMBERS = frozenset({"payload_kg", "std_kg", "total_kg", "target_kg", "fill_pct"
 TIMES = frozenset({"time", "start", "end"})
 """Of the numbers, the wall-clock ones (Unix seconds): from 1970 to 9999, as a screen
 writes them as dates."""
-LATEST = 253402214400.0
-"""9999-12-31T00:00:00 UTC."""
+LATEST = 253402128000.0
+"""9999-12-30T00:00:00 UTC: the last time whose date can be written in year 9999 (a
+day short of its end, for any time zone); ``shoveld passes`` and ``report`` take their
+``--since`` and ``--until`` up to it too."""
 COUNTS = frozenset({"pass", "truck", "passes", "invalid_passes", "samples"})
 """Whole numbers, 0 or more."""
 FLAGS = frozenset({"valid", "closed", "misfit_high"})
