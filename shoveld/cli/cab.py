@@ -74,20 +74,16 @@ def tls_from_args(args: argparse.Namespace) -> TlsConfig | None:
     if not args.tls:
         return None
     from shoveld.daemon.config import TlsConfig
-    from shoveld.security.pki import PkiError, check_issued_by, check_key, check_key_of, read_cert
+    from shoveld.security.pki import PkiError, check_peer_files
 
     tls = TlsConfig(*(Path(x) for x in args.tls))
     for x in tls.ca, tls.certificate, tls.key:
         if not x.is_file():
             raise CliError(f"--tls: {x}: no such file")
     # what a handshake would refuse without saying why: another site's CA, another
-    # peer's key, a key other users may read
+    # peer's key, a key other users may read, a certificate out of date
     try:
-        read_cert(tls.ca)
-        read_cert(tls.certificate)
-        check_issued_by(tls.certificate, tls.ca)
-        check_key(tls.key)
-        check_key_of(tls.key, tls.certificate)
+        check_peer_files(tls.ca, tls.certificate, tls.key)
     except PkiError as e:
         raise CliError(f"--tls: {e}") from None
     return tls

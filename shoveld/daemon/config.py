@@ -429,41 +429,22 @@ def check_tls_files(cfg: DaemonConfig, dates: bool = True) -> list[str]:
     tls = cfg.zenoh.tls
     if tls is None:
         return []
-    from shoveld.security.pki import (
-        PkiError,
-        check_cert_dates,
-        check_issued_by,
-        check_key,
-        check_key_of,
-        read_cert,
-    )
+    from shoveld.security.pki import CertInfo, PeerFileError, PkiError, check_peer_files
+
+    def this_shovel(info: CertInfo) -> None:
+        if info.role not in (None, "shovel") or info.common_name != cfg.shovel_id:
+            raise PkiError(
+                f"{info.path} is for {info.common_name!r} (role {info.role}), not shovel "
+                f"{cfg.shovel_id!r}: the routers let it publish only under "
+                f"{cfg.zenoh.prefix}/{info.common_name}/")
 
     where = str(cfg.path) if cfg.path else "<config>"
-    notes = []
     try:
-        for k in ("ca", "certificate"):
-            try:
-                info = read_cert(getattr(tls, k))
-                if dates:
-                    check_cert_dates(info)
-            except PkiError as e:
-                raise ConfigError(f"{where}: key 'zenoh.tls.{k}': {e}") from None
-            notes.append(f"{k} {info.path}: {info.common_name!r}, valid until "
-                         f"{info.not_after:%Y-%m-%d}")
-        if info.role not in (None, "shovel") or info.common_name != cfg.shovel_id:
-            raise ConfigError(
-                f"{where}: key 'zenoh.tls.certificate': {info.path} is for "
-                f"{info.common_name!r} (role {info.role}), not shovel {cfg.shovel_id!r}: the "
-                f"routers let it publish only under {cfg.zenoh.prefix}/{info.common_name}/")
-        try:
-            check_issued_by(tls.certificate, tls.ca)
-        except PkiError as e:
-            raise ConfigError(f"{where}: key 'zenoh.tls.certificate': {e}") from None
-        check_key(tls.key)
-        check_key_of(tls.key, tls.certificate)
-    except PkiError as e:
-        raise ConfigError(f"{where}: key 'zenoh.tls.key': {e}") from None
-    return notes
+        ca, info = check_peer_files(tls.ca, tls.certificate, tls.key, dates, this_shovel)
+    except PeerFileError as e:
+        raise ConfigError(f"{where}: key 'zenoh.tls.{e.which}': {e}") from None
+    return [f"{k} {c.path}: {c.common_name!r}, valid until {c.not_after:%Y-%m-%d}"
+            for k, c in (("ca", ca), ("certificate", info))]
 
 
 def parse_config(doc: Mapping[str, Any], where: str = "<config>",

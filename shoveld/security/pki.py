@@ -14,6 +14,7 @@ import datetime as dt
 import ipaddress
 import os
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -326,3 +327,44 @@ def check_cert_dates(info: CertInfo, now: dt.datetime | None = None) -> None:
     if t < info.not_before:
         raise PkiError(f"{info.path}: certificate {info.common_name!r} is not valid before "
                        f"{info.not_before:%Y-%m-%d %H:%M} UTC (check the clock)")
+
+
+class PeerFileError(PkiError):
+    """A peer's TLS file that fails :func:`check_peer_files`; ``which`` is ``"ca"``,
+    ``"certificate"`` or ``"key"``, for the caller to name its own key or option."""
+
+    def __init__(self, which: str, message: str) -> None:
+        super().__init__(message)
+        self.which = which
+
+
+def check_peer_files(ca: str | Path, certificate: str | Path, key: str | Path,
+                     dates: bool = True, holder: Callable[[CertInfo], None] | None = None
+                     ) -> tuple[CertInfo, CertInfo]:
+    """What a peer's TLS handshake would refuse without saying why, checked before it:
+    both certificates readable and (with ``dates``) in date, the certificate the one
+    ``holder`` expects (it raises PkiError if not) and signed by the site CA, the key the
+    certificate's and not readable by the machine's other users. The daemon's config
+    and the screens' ``--tls`` share it. Returns the CA's and the certificate's
+    :class:`CertInfo`; :class:`PeerFileError` names the file."""
+    infos = []
+    for which, path in (("ca", ca), ("certificate", certificate)):
+        try:
+            info = read_cert(path)
+            if dates:
+                check_cert_dates(info)
+        except PkiError as e:
+            raise PeerFileError(which, str(e)) from None
+        infos.append(info)
+    try:
+        if holder is not None:
+            holder(infos[1])
+        check_issued_by(certificate, ca)
+    except PkiError as e:
+        raise PeerFileError("certificate", str(e)) from None
+    try:
+        check_key(key)
+        check_key_of(key, certificate)
+    except PkiError as e:
+        raise PeerFileError("key", str(e)) from None
+    return infos[0], infos[1]

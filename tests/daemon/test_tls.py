@@ -9,6 +9,7 @@ fake pass under shovel s1's keys.
 
 from __future__ import annotations
 
+import datetime as dt
 import json
 import shutil
 import threading
@@ -388,13 +389,17 @@ def test_cab_straight_to_a_tls_daemon(tmp_path: Path, e2e_table: SignalsTable,
 def test_a_screen_names_what_its_tls_files_lack(tmp_path: Path, site: Site,
                                                  capsys: pytest.CaptureFixture[str]) -> None:
     """A cab's or the office's ``--tls`` is checked as the daemon's config is: another
-    site's CA, another certificate's key, a key others may read, each in one line before
-    anything connects (a handshake refuses them without saying why)."""
+    site's CA, another certificate's key, a key others may read, a certificate out of
+    date (until 2026-11-30 the screens let that one through to a silent handshake
+    failure), each in one line before anything connects (a handshake refuses them
+    without saying why)."""
     from shoveld.cli import main
 
     other = tmp_path / "other-ca"
     pki.init_ca(other)
     pki.issue(other, "cab-x", "cab")
+    pki.issue(site.dir, "cab-old", "cab", days=30,
+              not_before=dt.datetime.now(dt.UTC) - dt.timedelta(days=40))
     ca, crt, key = (str(site.dir / n) for n in ("ca.crt", "cab-s1.crt", "cab-s1.key"))
     loose = tmp_path / "loose.key"
     loose.write_bytes(Path(key).read_bytes())
@@ -404,6 +409,8 @@ def test_a_screen_names_what_its_tls_files_lack(tmp_path: Path, site: Site,
          "not signed by the site CA of"),
         ("office", [ca, crt, str(other / "cab-x.key")], "not the key of"),
         ("cab", [ca, crt, str(loose)], "(mode 0604)"),
+        ("office", [ca, str(site.dir / "cab-old.crt"), str(site.dir / "cab-old.key")],
+         "certificate 'cab-old' expired on"),
     ]:
         assert main([cmd, "--tls", *files, "--connect", "tls/127.0.0.1:9",
                      "--duration", "30"]) == 2
