@@ -43,10 +43,17 @@ log = logging.getLogger(__name__)
 
 class _NoResponseFilter(logging.Filter):
     """pymodbus logs every unanswered request at ERROR with a frame dump; the driver
-    reports timeouts per channel in its health, so that line is noise here."""
+    reports timeouts per channel in its health, so that line is noise here, and so is
+    the "Repeating...." pymodbus writes in its place when it comes again."""
+
+    dropped = False
 
     def filter(self, record: logging.LogRecord) -> bool:
-        return not str(record.getMessage()).startswith("No response received")
+        text = str(record.getMessage())
+        if text == "Repeating....":
+            return not self.dropped
+        self.dropped = text.startswith("No response received")
+        return not self.dropped
 
 
 logging.getLogger("pymodbus.logging").addFilter(_NoResponseFilter())
@@ -293,6 +300,10 @@ class ModbusAdcDriver(Driver):
         self.health.extra["channels"] = chh = {c.name: _new_channel_health()
                                                for c in config.channels}
         self.health.extra["exceptions"] = 0
+        self.health.extra["babbling"] = False
+        self._garbled: str | None = None
+        """What the framer threw away in the current request: an answer that was not
+        Modbus (:meth:`_watch_framer`); None if nothing."""
         self._plan = [(address, count, chans,
                        tuple((ch.name, ch.register - address, ch.word_decoder(), chh[ch.name])
                              for ch in chans))
@@ -340,11 +351,44 @@ class ModbusAdcDriver(Driver):
         from drivers.modbus_adc.strict import strict_registers
 
         if c.transport == "tcp":
-            return strict_registers(ModbusTcpClient(c.host, port=int(c.port),
-                                                    timeout=c.timeout_s, retries=c.retries))
-        return strict_registers(ModbusSerialClient(
-            str(c.port), framer=FramerType.RTU, baudrate=c.baudrate, parity=c.parity,
-            stopbits=c.stopbits, bytesize=c.bytesize, timeout=c.timeout_s, retries=c.retries))
+            client = ModbusTcpClient(c.host, port=int(c.port), timeout=c.timeout_s,
+                                     retries=c.retries)
+        else:
+            client = ModbusSerialClient(
+                str(c.port), framer=FramerType.RTU, baudrate=c.baudrate, parity=c.parity,
+                stopbits=c.stopbits, bytesize=c.bytesize, timeout=c.timeout_s,
+                retries=c.retries)
+        self._watch_framer(client.framer)
+        return strict_registers(client)
+
+    def _watch_framer(self, framer: Any) -> None:
+        """Count the answers that are not Modbus as bad frames of this driver. pymodbus
+        drops them on its own: over TCP one whose header's protocol id is not 0 with an
+        ERROR line of its logger per answer (and keeps its bytes until the request times
+        out), over RTU one whose CRC fails at DEBUG; either way the request then times out,
+        and the driver's health said "not answering" of a module that babbles. Here they
+        are bad frames, the channels' error says what came, ``babbling`` is set (health's
+        problems name it), pymodbus's line is not written, and a TCP answer's bytes are
+        dropped at once."""
+        decode = framer.decode
+        tcp = self.config.transport == "tcp"
+
+        def watched(data: bytes) -> tuple[int, int, int, bytes]:
+            if tcp and len(data) >= 8 and data[2:4] != b"\0\0":
+                self._thrown_away(len(data), "answers that are not Modbus TCP (protocol id "
+                                  f"{int.from_bytes(data[2:4], 'big')})")
+                return len(data), 0, 0, b""
+            used, dev, tid, frame = decode(data)
+            if used and not frame and not tcp:
+                self._thrown_away(used, "answers whose CRC is wrong")
+            return used, dev, tid, frame
+
+        framer.decode = watched
+
+    def _thrown_away(self, nbytes: int, what: str) -> None:
+        self.health.bad_frames += 1
+        self.health.rejected_bytes += nbytes
+        self._garbled = what
 
     def open(self) -> None:
         self.close()
@@ -376,6 +420,7 @@ class ModbusAdcDriver(Driver):
             return None, "timeout", None
         fn = client.read_input_registers if c.function == "input" else \
             client.read_holding_registers
+        self._garbled = None
         try:
             rr = fn(address, count=count, device_id=c.unit)
         except (TimeoutError, OSError):
@@ -407,6 +452,7 @@ class ModbusAdcDriver(Driver):
         values: dict[str, float] = {}
         invalid: set[str] = set()
         answered = False
+        garbled = None
         clock = self.clock
         isfinite = math.isfinite
         t = clock()
@@ -431,6 +477,7 @@ class ModbusAdcDriver(Driver):
                 continue
             if err == "timeout":
                 self.health.timeouts += 1
+                garbled = self._garbled or garbled
             else:
                 self.health.extra["exceptions"] += 1
             for ch in chans:
@@ -439,12 +486,17 @@ class ModbusAdcDriver(Driver):
                 h["state"] = err
                 if err == "timeout":
                     h["timeouts"] += 1
-                    h["last_error"] = f"no answer within {c.timeout_s:g} s"
+                    h["last_error"] = (f"no answer within {c.timeout_s:g} s" if garbled is None
+                                       else f"{garbled} and no answer within {c.timeout_s:g} s")
                 else:
                     h["exceptions"] += 1
                     h["last_error"] = (f"Modbus exception code {code}" if code is not None else
                                        "a reply with another function code or length")
         now = t  # receive time of the last block, taken right after its answer
+        if garbled is not None and not self.health.extra["babbling"]:
+            self._babbling(garbled)
+        elif answered and garbled is None and self.health.extra["babbling"]:
+            self._babbling(None)
         stale_after = c.stale_after_s
         for h in self._channel_health:
             last = h["last_ok_t"]
@@ -453,6 +505,18 @@ class ModbusAdcDriver(Driver):
         self.emit(sink, reading)
         self._failed_polls = 0 if answered else self._failed_polls + 1
         return reading
+
+    def _babbling(self, garbled: str | None) -> None:
+        """Say once when the module starts and stops sending what is not Modbus (a
+        wrong baud rate or parity on RTU, another protocol on the port, a failing line)."""
+        self.health.extra["babbling"] = garbled is not None
+        if garbled is not None:
+            log.warning("%s: Modbus module at %s babbling: %s", self.name,
+                        self.config.endpoint, garbled)
+            self.health.last_error = f"babbling: {garbled}"
+        else:
+            log.info("%s: Modbus module at %s answers in Modbus again", self.name,
+                     self.config.endpoint)
 
     def read(self, sink: Sink) -> None:
         if self._client is None:

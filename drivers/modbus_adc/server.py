@@ -58,6 +58,9 @@ class RegisterServer:
         self.registers = registers
         self.silent = False
         """True: receive requests but never answer (module hung, cable cut)."""
+        self.garble: Callable[[bytes], bytes] | None = None
+        """Each answer's bytes are sent through this (noise on the line, a wrong baud
+        rate, a device that speaks another protocol); None: sent as they are."""
         self.requests = 0
         self.in_flight = False
         self.last_request_t: float | None = None
@@ -110,6 +113,8 @@ class RegisterServer:
                 self._drop_next = False
                 self.hold_until = time.monotonic() + self.drop_hold_s
                 return b""
+            if self.garble is not None:
+                return self.garble(data)
         else:
             self.in_flight = True
             self.hold_until = 0.0

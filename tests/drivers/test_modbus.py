@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import logging
+
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
@@ -154,6 +156,51 @@ def test_module_that_stops_answering(transport: str) -> None:
         assert run.wait_for(lambda: len(run.readings) > n + 3 and not run.readings[-1].invalid,
                             5)
         assert all(c["state"] == "ok" and not c["stale"] for c in chans.values())
+
+
+def _wrong_protocol_id(answer: bytes) -> bytes:
+    """A TCP answer from a device that speaks another protocol on port 502."""
+    return answer[:2] + b"\x12\x34" + answer[4:]
+
+
+def _noise(answer: bytes) -> bytes:
+    """An RTU answer with one bit flipped on the line, in its first register."""
+    return answer[:4] + bytes([answer[4] ^ 0x10]) + answer[5:]
+
+
+@pytest.mark.parametrize("transport", ["tcp", "rtu"])
+def test_a_module_that_babbles_is_named_in_health(transport: str,
+                                                  caplog: pytest.LogCaptureFixture) -> None:
+    """Answers that are not Modbus are bad frames and set ``babbling``, which health's
+    problems name; until 2026-11-30 the driver saw only timeouts and said "not
+    answering" of a module that answers garbage, while pymodbus wrote an ERROR line per
+    answer over TCP."""
+    from shoveld.daemon.health import problems
+
+    with ModbusAdcEmulator(lambda t: VALUES, CHANNELS, transport=transport) as emu, \
+            DriverRunner(fast(emu, reconnect_after=1000)) as run:
+        h = run.driver.health
+        assert run.wait_for(lambda: len(run.readings) >= 5, 5)
+        assert h.bad_frames == 0 and not h.extra["babbling"]
+        emu.server.garble = _wrong_protocol_id if transport == "tcp" else _noise
+        with caplog.at_level(logging.DEBUG):
+            assert run.wait_for(lambda: h.bad_frames >= 5 and h.extra["babbling"], 5)
+        what = "not Modbus TCP (protocol id 4660)" if transport == "tcp" else "CRC is wrong"
+        chans = h.extra["channels"]
+        assert all(what in c["last_error"] and c["state"] == "timeout"
+                   for c in chans.values()), chans
+        assert what in h.last_error
+        assert "adc: babbling (malformed data)" in problems(
+            {"adc": {"state": "invalid", **h.extra}}, {}, {"open": True}, {})
+        assert not [r for r in caplog.records if r.name.startswith("pymodbus")
+                    and r.levelno >= logging.WARNING], caplog.text
+        said = [r for r in caplog.records if "babbling" in r.getMessage()]
+        assert len(said) == 1 and said[0].levelno == logging.WARNING, caplog.text  # once
+        n = len(run.readings)
+        emu.server.garble = None
+        assert run.wait_for(lambda: len(run.readings) > n + 3 and not run.readings[-1].invalid,
+                            5)
+        assert not h.extra["babbling"]
 
 
 def test_exception_responses_reported_per_channel() -> None:
