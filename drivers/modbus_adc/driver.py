@@ -59,6 +59,9 @@ class _NoResponseFilter(logging.Filter):
 logging.getLogger("pymodbus.logging").addFilter(_NoResponseFilter())
 
 _FUNCTIONS = {"input": 4, "holding": 3}
+FAULT_HOLD_S = 5.0
+"""A Modbus module's ``babbling`` or ``answering_late`` is cleared this long after its
+last sign (an answer in Modbus, in time, since)."""
 _COMMON_KEYS = {"kind", "name", "unit", "function", "poll_hz", "timeout_s", "retries",
                 "stale_after_s", "reconnect_after", "max_gap", "channels"}
 _TCP_KEYS = {"host", "port"}
@@ -301,6 +304,14 @@ class ModbusAdcDriver(Driver):
                                                for c in config.channels}
         self.health.extra["exceptions"] = 0
         self.health.extra["babbling"] = False
+        self.health.extra["late_answers"] = 0
+        self.health.extra["answering_late"] = False
+        self._late = False
+        """An answer to an earlier request came in this request's wait (it came after
+        that request's timeout)."""
+        self._signs = {"babbling": -math.inf, "answering_late": -math.inf}
+        """When each of the two faults was last seen (the driver's clock)."""
+        self.fault_hold_s = FAULT_HOLD_S
         self._garbled: str | None = None
         """What the framer threw away in the current request: an answer that was not
         Modbus (:meth:`_watch_framer`); None if nothing."""
@@ -369,21 +380,43 @@ class ModbusAdcDriver(Driver):
         and the driver's health said "not answering" of a module that babbles. Here they
         are bad frames, the channels' error says what came, ``babbling`` is set (health's
         problems name it), pymodbus's line is not written, and a TCP answer's bytes are
-        dropped at once."""
-        decode = framer.decode
+        dropped at once. A TCP answer to an earlier request (its transaction id says so:
+        the module answered after that request's timeout) is counted in ``late_answers``
+        and ``answering_late`` set, where pymodbus wrote an ERROR line with a dump of the
+        last frames."""
+        decode, handle = framer.decode, framer.handleFrame
         tcp = self.config.transport == "tcp"
+        expected = [0]
 
         def watched(data: bytes) -> tuple[int, int, int, bytes]:
-            if tcp and len(data) >= 8 and data[2:4] != b"\0\0":
-                self._thrown_away(len(data), "answers that are not Modbus TCP (protocol id "
-                                  f"{int.from_bytes(data[2:4], 'big')})")
-                return len(data), 0, 0, b""
-            used, dev, tid, frame = decode(data)
-            if used and not frame and not tcp:
-                self._thrown_away(used, "answers whose CRC is wrong")
-            return used, dev, tid, frame
+            if not tcp:
+                used, dev, tid, frame = decode(data)
+                if used and not frame:
+                    self._thrown_away(used, "answers whose CRC is wrong")
+                return used, dev, tid, frame
+            skipped = 0
+            while True:
+                rest = data[skipped:] if skipped else data
+                if len(rest) >= 8 and rest[2:4] != b"\0\0":
+                    self._thrown_away(len(rest), "answers that are not Modbus TCP (protocol "
+                                      f"id {int.from_bytes(rest[2:4], 'big')})")
+                    return len(data), 0, 0, b""
+                used, dev, tid, frame = decode(rest)
+                if frame and tid and expected[0] and tid != expected[0]:
+                    # an earlier request's answer, come after that request's timeout:
+                    # pymodbus skips it with an ERROR line and a frame dump
+                    self.health.extra["late_answers"] += 1
+                    self._late = True
+                    skipped += used
+                    continue
+                return used + skipped, dev, tid, frame
+
+        def handle_frame(data: bytes, exp_devid: int, exp_tid: int) -> Any:
+            expected[0] = exp_tid
+            return handle(data, exp_devid, exp_tid)
 
         framer.decode = watched
+        framer.handleFrame = handle_frame
 
     def _thrown_away(self, nbytes: int, what: str) -> None:
         self.health.bad_frames += 1
@@ -453,6 +486,7 @@ class ModbusAdcDriver(Driver):
         invalid: set[str] = set()
         answered = False
         garbled = None
+        self._late = False
         clock = self.clock
         isfinite = math.isfinite
         t = clock()
@@ -493,10 +527,8 @@ class ModbusAdcDriver(Driver):
                     h["last_error"] = (f"Modbus exception code {code}" if code is not None else
                                        "a reply with another function code or length")
         now = t  # receive time of the last block, taken right after its answer
-        if garbled is not None and not self.health.extra["babbling"]:
-            self._babbling(garbled)
-        elif answered and garbled is None and self.health.extra["babbling"]:
-            self._babbling(None)
+        if self._late or garbled is not None or self._faulty:
+            self._faults(now, garbled, answered)
         stale_after = c.stale_after_s
         for h in self._channel_health:
             last = h["last_ok_t"]
@@ -506,17 +538,35 @@ class ModbusAdcDriver(Driver):
         self._failed_polls = 0 if answered else self._failed_polls + 1
         return reading
 
-    def _babbling(self, garbled: str | None) -> None:
-        """Say once when the module starts and stops sending what is not Modbus (a
-        wrong baud rate or parity on RTU, another protocol on the port, a failing line)."""
-        self.health.extra["babbling"] = garbled is not None
-        if garbled is not None:
-            log.warning("%s: Modbus module at %s babbling: %s", self.name,
-                        self.config.endpoint, garbled)
-            self.health.last_error = f"babbling: {garbled}"
-        else:
-            log.info("%s: Modbus module at %s answers in Modbus again", self.name,
-                     self.config.endpoint)
+    @property
+    def _faulty(self) -> bool:
+        x = self.health.extra
+        return bool(x["babbling"] or x["answering_late"])
+
+    def _faults(self, now: float, garbled: str | None, answered: bool) -> None:
+        """``babbling`` (answers that are not Modbus: a wrong baud rate or parity on RTU,
+        another protocol on the port, a failing line) and ``answering_late`` (answers
+        after the timeout, which land in a later request's wait: a ``timeout_s`` too short
+        for the module or its gateway), each said once when it starts and once when it
+        has not been seen for ``fault_hold_s`` with the module answering, so an
+        intermittent fault is two lines, not two a poll."""
+        x, c = self.health.extra, self.config
+        for key, seen, what in (("babbling", garbled is not None, garbled),
+                                ("answering_late", self._late,
+                                 f"answers after the {c.timeout_s:g} s timeout")):
+            if seen:
+                self._signs[key] = now
+                if not x[key]:
+                    x[key] = True
+                    log.warning("%s: Modbus module at %s %s: %s%s", self.name, c.endpoint,
+                                key.replace("_", " "), what,
+                                "; timeout_s too short for it?" if key == "answering_late"
+                                else "")
+                    self.health.last_error = f"{key.replace('_', ' ')}: {what}"
+            elif x[key] and answered and now - self._signs[key] >= self.fault_hold_s:
+                x[key] = False
+                log.info("%s: Modbus module at %s no longer %s", self.name, c.endpoint,
+                         key.replace("_", " "))
 
     def read(self, sink: Sink) -> None:
         if self._client is None:

@@ -58,6 +58,9 @@ class RegisterServer:
         self.registers = registers
         self.silent = False
         """True: receive requests but never answer (module hung, cable cut)."""
+        self.delay_s = 0.0
+        """Each answer is sent this late (a module busy with its conversions, a slow
+        gateway): past the client's timeout it lands in the next request's wait."""
         self.garble: Callable[[bytes], bytes] | None = None
         """Each answer's bytes are sent through this (noise on the line, a wrong baud
         rate, a device that speaks another protocol); None: sent as they are."""
@@ -84,6 +87,8 @@ class RegisterServer:
     async def _action(self, fc: int, start: int, address: int, count: int,
                       regs: list[int], values: Any) -> Any:
         self.requests += 1
+        if self.delay_s > 0:
+            await asyncio.sleep(self.delay_s)
         if self.on_request is not None:
             self.on_request(fc, address, count)
         if values is not None:  # writes are not part of the emulated module

@@ -100,6 +100,9 @@ def problems(drivers: Mapping[str, dict[str, Any]], loop: dict[str, Any],
             out.append(f"{name}: invalid {', '.join(d.get('invalid_signals', []))}")
         if d.get("babbling"):
             out.append(f"{name}: babbling (malformed data)")
+        if d.get("answering_late"):
+            out.append(f"{name}: answering after its timeout ({d.get('late_answers')} late "
+                       "answers): timeout_s too short for it?")
         if d.get("jumping"):
             out.append(f"{name}: jumping (distances the handle cannot reach: dirty target, "
                        "something in the beam?)")

@@ -197,10 +197,43 @@ def test_a_module_that_babbles_is_named_in_health(transport: str,
         said = [r for r in caplog.records if "babbling" in r.getMessage()]
         assert len(said) == 1 and said[0].levelno == logging.WARNING, caplog.text  # once
         n = len(run.readings)
+        run.driver.fault_hold_s = 0.3
         emu.server.garble = None
         assert run.wait_for(lambda: len(run.readings) > n + 3 and not run.readings[-1].invalid,
                             5)
-        assert not h.extra["babbling"]
+        assert run.wait_for(lambda: not h.extra["babbling"], 2)
+
+
+def test_a_module_that_answers_after_the_timeout_is_named_in_health(
+        caplog: pytest.LogCaptureFixture) -> None:
+    """A Modbus TCP module whose answers come after the driver's timeout: each lands in
+    a later request's wait, where its transaction id shows it late. It is counted and
+    health says so, once; until 2026-11-30 the channels were only "not answering" now
+    and then, and pymodbus wrote an ERROR line with a dump of twenty frames for each."""
+    from shoveld.daemon.health import problems
+
+    with ModbusAdcEmulator(lambda t: VALUES, CHANNELS) as emu, \
+            DriverRunner(fast(emu, reconnect_after=1000)) as run:
+        h = run.driver.health
+        assert run.wait_for(lambda: len(run.readings) >= 5, 5)
+        assert not h.extra["answering_late"]
+        emu.server.delay_s = 0.3  # the driver's timeout is 0.05 s
+        with caplog.at_level(logging.DEBUG):
+            assert run.wait_for(lambda: h.extra["late_answers"] >= 3, 5)
+        assert h.extra["answering_late"] and "answers after the 0.05 s timeout" in \
+            h.last_error
+        said = problems({"adc": {"state": "ok", **h.extra}}, {}, {"open": True}, {})
+        assert [p for p in said if p.startswith("adc: answering after its timeout (")], said
+        assert not [r for r in caplog.records if r.name.startswith("pymodbus")
+                    and r.levelno >= logging.WARNING], caplog.text
+        warned = [r for r in caplog.records if "answering late" in r.getMessage()]
+        assert len(warned) == 1, caplog.text  # once, not once a poll
+        run.driver.fault_hold_s = 0.3
+        emu.server.delay_s = 0.0
+        assert run.wait_for(lambda: not h.extra["answering_late"], 3)
+        n = len(run.readings)
+        assert run.wait_for(lambda: len(run.readings) > n + 3 and not run.readings[-1].invalid,
+                            5)
 
 
 def test_exception_responses_reported_per_channel() -> None:
