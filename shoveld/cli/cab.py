@@ -188,6 +188,15 @@ class CabState:
             log.warning("%s: %s from shovel %s refused (%s); %d so far", topic,
                         "message" if topic != "status" else "answer", shovel, problem, n)
 
+    def refused_note(self, shovel: str) -> str | None:
+        """What the screen says of the messages it refused from ``shovel`` (None if
+        none): on the screen, not only in the log, for whoever looks at it."""
+        n = self.bad_messages.get(shovel, 0)
+        if not n:
+            return None
+        return (f"screen: {n_of(n, 'message', 'messages')} from this shovel refused "
+                "(fields of another kind: another version of the daemon?)")
+
     def view(self, shovel: str) -> ShovelView:
         v = self.shovels.get(shovel)
         if v is None:
@@ -357,8 +366,11 @@ class CabState:
                                    f"{n_of(r['not_judged'], 'truck', 'trucks')} with a pass "
                                    "not weighed" + (f"; {r['over_120']} over 120 %, OUTSIDE the "
                                                     "10/10/20 rule" if r.get("over_120") else ""))
-                if v.problems:
-                    out.append("  ! " + "; ".join(v.problems)[: width * 2])
+                problems = list(v.problems)
+                if (note := self.refused_note(name)) is not None:
+                    problems.append(note)
+                if problems:
+                    out.append("  ! " + "; ".join(problems)[: width * 2])
                 out.append("")
         return "\n".join(out) + "\n"
 

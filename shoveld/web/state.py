@@ -155,6 +155,10 @@ class ScreenState(CabState):
             self.lines.clear()  # (the terminal's line log is not used here)
         self._changed()
 
+    def on_bad_message(self, shovel: str, topic: str, problem: str) -> None:
+        super().on_bad_message(shovel, topic, problem)
+        self._changed()  # the count is on the page
+
     def on_status(self, shovel: str, st: dict[str, Any]) -> None:
         self.heard[shovel] = time.monotonic()
         super().on_status(shovel, st)
@@ -221,6 +225,8 @@ class ScreenState(CabState):
                             f"daemon: not heard for {age or 0:.0f} s")
         if self.link != "up":
             problems.insert(0, f"link: {self.link} {self.link_detail}".strip())
+        if (note := self.refused_note(v.shovel)) is not None:
+            problems.append(note)
         shift = self._shift_closed(v.shovel, truck)
         is_open = bool(truck) and not truck.get("closed")
         not_weighed = int(truck.get("invalid_passes") or 0)

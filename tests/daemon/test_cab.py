@@ -256,6 +256,8 @@ def test_a_message_of_another_shape_is_refused_and_counted(caplog) -> None:
             cab.close()
             peer.close()
     assert state.bad_messages == {"x": len(bad)}
+    # on the screen, not only in the log (since 2026-11-30)
+    assert f"screen: {len(bad)} messages from this shovel refused" in state.screen()
     assert [p["pass"] for p in state.view("x").passes] == [3]
     assert not [r for r in caplog.records if r.name.startswith("zenoh")], caplog.text
     refused = [r.getMessage() for r in caplog.records if r.name == "shoveld.cab"]

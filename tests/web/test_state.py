@@ -200,3 +200,22 @@ def test_the_live_number_carries_the_crowds_doubt_while_it_is_a_number() -> None
     st.on_message("s1", "payload/live", {"payload_kg": 30500.0, "std_kg": 300.0,
                                          "valid": True, "phase": "swing"})
     assert st.snapshot()["shovels"][0]["crowd_doubt"] is None
+
+
+def test_the_messages_refused_from_a_shovel_are_counted_on_the_page() -> None:
+    """A message of another shape is refused (``shoveld.daemon.messages``); the page says
+    how many, for the operator or mine IT who looks at it, and redraws when one comes."""
+    changes: list[int] = []
+    st = ScreenState(on_change=lambda: changes.append(1))
+    st.set_link("up")
+    st.on_alive("s1", True)
+    st.on_message("s1", "payload/live", {"payload_kg": 20000.0, "std_kg": 300.0,
+                                         "valid": True, "phase": "swing"})
+    assert not [p for p in st.snapshot()["shovels"][0]["problems"] if "refused" in p]
+    n = len(changes)
+    for _ in range(3):
+        st.on_bad_message("s1", "pass", "key 'payload_kg' is 'heavy', not a finite number")
+    assert len(changes) == n + 3
+    problems = st.snapshot()["shovels"][0]["problems"]
+    assert "screen: 3 messages from this shovel refused (fields of another kind: another " \
+           "version of the daemon?)" in problems
