@@ -2,13 +2,13 @@
 
 Each drill (``hil_fixtures/fault_drill.py``) runs the daemon on the virtual shovel's
 emulators at real time and makes each fault while a pass is under way: the MTi
-unplugged and silent, the laser silent and babbling, a Modbus module silent, babbling
-and answering after its timeout. It prints, per fault, the time from the fault to the
-arrival of the first health message naming its device (at a Zenoh subscriber, as a
-cab), in seconds and against the bound the issue sets (one health period after the
-fault can be seen: the device's ``max_age_s``), the live estimates published as numbers
-while the fault's inputs were invalid (goal 0), the loop's rate and overruns, and the
-passes published against those in the pass log (goal: none lost).
+unplugged and silent, the laser unplugged, silent and babbling, a Modbus module powered
+off, silent, babbling and answering after its timeout. It prints, per fault, the time
+from the fault to the arrival of the first health message naming its device (at a
+Zenoh subscriber, as a cab), in seconds and against the bound the issue sets (one health
+period after the fault can be seen: the device's ``max_age_s``), the live estimates
+published as numbers while the fault's inputs were invalid (goal 0), the loop's rate and
+overruns, and the passes published against those in the pass log (goal: none lost).
 
 Usage: ``.venv/bin/python bench/fault_latency.py [--runs 3] [--health-period 1.0]``
 (about 1-2 min a run)
@@ -17,7 +17,6 @@ Usage: ``.venv/bin/python bench/fault_latency.py [--runs 3] [--health-period 1.0
 from __future__ import annotations
 
 import argparse
-import socket
 import sys
 import tempfile
 from pathlib import Path
@@ -26,12 +25,6 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 PARAMS = ROOT / "hil_fixtures" / "captures" / "daemon-e2e" / "params.toml"
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def main() -> None:
@@ -46,8 +39,8 @@ def main() -> None:
     drills = []
     for i in range(a.runs):
         with tempfile.TemporaryDirectory() as tmp:
-            d = run_drill(table, PARAMS, Path(tmp), free_port(),
-                          health_period_s=a.health_period, seed=i + 1)
+            d = run_drill(table, PARAMS, Path(tmp), health_period_s=a.health_period,
+                          seed=i + 1)
         drills.append(d)
         worst = max((o.latency_s for o in d.outcomes if o.latency_s is not None),
                     default=float("nan"))

@@ -9,7 +9,8 @@ other than its target (``stray`` = fraction of samples from a return 0.5-3 m off
 dust, a rope, the boom in the beam), or look like a
 device at another baud rate (it compares the speed the driver set on the tty
 with its own and, on a mismatch, ignores commands and sends only noise, as a UART
-receiving at the wrong rate would).
+receiving at the wrong rate would). Its cable can be pulled and plugged back in
+(:meth:`unplug`, :meth:`plug`): ``port`` is a link to the pty that vanishes with it.
 
 The distance comes from a *source*: ``source(t) -> metres | None`` (None = no
 target), optionally ``(metres | None, amplitude)``; :func:`source_from_table`
@@ -19,7 +20,10 @@ builds one from a signals table through ``Installation.laser_m``.
 from __future__ import annotations
 
 import math
+import os
 import random
+import shutil
+import tempfile
 import threading
 import time
 from collections.abc import Callable
@@ -69,7 +73,13 @@ class Ar4000Emulator:
         self.source = source
         self.baudrate = baudrate
         self.link = open_pty_link()
-        self.port = self.link.slave_path
+        self._dir = tempfile.mkdtemp(prefix="ar4000-emu-")
+        self.port = os.path.join(self._dir, "ttyLASER")
+        """A link to the pty's slave side: the path the driver opens, stable across
+        :meth:`unplug` and :meth:`plug` as a udev name is."""
+        os.symlink(self.link.slave_path, self.port)
+        self._plugged = True
+        self._io = threading.Lock()
         self._origin = time.monotonic()
         self.clock: Callable[[], float] = clock or (lambda: time.monotonic() - self._origin)
         self.sample_interval_us = sample_interval_us
@@ -104,7 +114,28 @@ class Ar4000Emulator:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=2.0)
-        self.link.close()
+        if self._plugged:
+            self.link.close()
+        shutil.rmtree(self._dir, ignore_errors=True)
+
+    def unplug(self) -> None:
+        """Pull the cable: the pty closes (the driver's reads fail) and the path vanishes."""
+        with self._io:
+            if self._plugged:
+                self._plugged = False
+                self.link.close()
+                os.unlink(self.port)
+
+    def plug(self) -> None:
+        """Plug it back in: a new pty behind the same path; the device streams at the
+        interval it was set to (an AR4000 keeps its settings through a power cut)."""
+        with self._io:
+            if not self._plugged:
+                self.link = open_pty_link()
+                tmp = self.port + ".new"
+                os.symlink(self.link.slave_path, tmp)
+                os.replace(tmp, self.port)
+                self._plugged = True
 
     def __enter__(self) -> Ar4000Emulator:
         return self.start()
@@ -175,28 +206,38 @@ class Ar4000Emulator:
     def _run(self) -> None:
         next_t = self.clock()
         while not self._stop.is_set():
-            interval = self.sample_interval_us * 1e-6
-            now = self.clock()
-            wait = max(0.0, min(next_t - now, 0.005))
-            data = self.link.read(wait)
-            if data and not self.silent and self.baud_matches():
-                self._take_commands(data)
-            now = self.clock()
-            if now < next_t:
-                continue
-            next_t += interval
-            if next_t < now - 10 * interval:  # the clock jumped; do not burst to catch up
-                next_t = now + interval
-            if self.silent:
-                continue
-            if not self.baud_matches():
-                noise = bytes(self._rng.randrange(256) for _ in range(8)).replace(b"\n", b"\x80")
-                self.link.write(noise, timeout_s=0.05)
-                self.garbage_sent += 1
-                continue
-            if self.babble and self._rng.random() < self.babble:
-                self.link.write(self._garbage(), timeout_s=0.05)
-                self.garbage_sent += 1
-                continue
+            with self._io:
+                plugged = self._plugged
+                if plugged:
+                    next_t = self._step(next_t)
+            if not plugged:
+                time.sleep(0.005)
+                next_t = self.clock()
+
+    def _step(self, next_t: float) -> float:
+        """One wait for commands and, when due, one line out; the next line's time."""
+        interval = self.sample_interval_us * 1e-6
+        now = self.clock()
+        wait = max(0.0, min(next_t - now, 0.005))
+        data = self.link.read(wait)
+        if data and not self.silent and self.baud_matches():
+            self._take_commands(data)
+        now = self.clock()
+        if now < next_t:
+            return next_t
+        next_t += interval
+        if next_t < now - 10 * interval:  # the clock jumped; do not burst to catch up
+            next_t = now + interval
+        if self.silent:
+            return next_t
+        if not self.baud_matches():
+            noise = bytes(self._rng.randrange(256) for _ in range(8)).replace(b"\n", b"\x80")
+            self.link.write(noise, timeout_s=0.05)
+            self.garbage_sent += 1
+        elif self.babble and self._rng.random() < self.babble:
+            self.link.write(self._garbage(), timeout_s=0.05)
+            self.garbage_sent += 1
+        else:
             self.link.write(self.format_sample(now), timeout_s=0.05)
             self.lines_sent += 1
+        return next_t

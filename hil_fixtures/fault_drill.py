@@ -67,8 +67,12 @@ def _adc(vs: VirtualShovel) -> Any:
 FAULTS: tuple[Fault, ...] = (
     Fault("MTi unplugged", "mti", lambda vs: vs.mti.unplug(), lambda vs: vs.mti.plug()),
     Fault("MTi silent", "mti", lambda vs: vs.mti.go_silent(), lambda vs: vs.mti.come_back()),
+    Fault("laser unplugged", "laser", lambda vs: _laser(vs).unplug(),
+          lambda vs: _laser(vs).plug()),
     Fault("laser silent", "laser", _set(_laser, "silent", True), _set(_laser, "silent", False)),
     Fault("laser babbling", "laser", _set(_laser, "babble", 1.0), _set(_laser, "babble", 0.0)),
+    Fault("Modbus module powered off", "adc_motors", lambda vs: vs.adc_motors.stop(),
+          lambda vs: vs.adc_motors.start()),
     Fault("Modbus module silent", "adc_motors", _set(_adc, "silent", True),
           _set(_adc, "silent", False)),
     Fault("Modbus module babbling", "adc_motors", _set(_adc, "garble", _wrong_protocol),
@@ -180,7 +184,15 @@ def cycles(passes: int = 8, seed: int = 11) -> SignalsTable:
     return simulate_cycles(passes, seed=seed, truck_target_kg=62000.0).table
 
 
-def run_drill(table: SignalsTable, params_path: Path, state_dir: Path, port: int,
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def run_drill(table: SignalsTable, params_path: Path, state_dir: Path,
               faults: tuple[Fault, ...] = FAULTS, health_period_s: float = 1.0,
               name_wait_s: float = 10.0, clear_wait_s: float = 20.0, seed: int = 1) -> Drill:
     """Start the daemon on a virtual shovel playing ``table``, make each fault in a pass,
@@ -191,10 +203,12 @@ def run_drill(table: SignalsTable, params_path: Path, state_dir: Path, port: int
     from shoveld.daemon.service import Service
     from shoveld.model.params import load_params
 
-    endpoint = f"tcp/127.0.0.1:{port}"
     outcomes: list[Outcome] = []
     notes: list[str] = []
     with VirtualShovel(table) as vs:
+        # the port drawn once the emulators' servers have theirs (drawn before, the OS
+        # once gave it to a Modbus server)
+        endpoint = f"tcp/127.0.0.1:{_free_port()}"
         vc = vs.config()
         cfg = parse_config({"shovel": {"id": "drill", "params": str(params_path),
                                        "state_dir": str(state_dir)},

@@ -41,22 +41,27 @@ from drivers.modbus_adc.channels import Channel, ChannelMap
 log = logging.getLogger(__name__)
 
 
-class _NoResponseFilter(logging.Filter):
-    """pymodbus logs every unanswered request at ERROR with a frame dump; the driver
-    reports timeouts per channel in its health, so that line is noise here, and so is
-    the "Repeating...." pymodbus writes in its place when it comes again."""
+class _SaidByTheDriver(logging.Filter):
+    """pymodbus's client logs at ERROR, each with a dump of its last twenty frames, what
+    the driver says itself: every unanswered request (the driver counts timeouts per
+    channel in its health), and every failed connection, TCP or serial (the driver's
+    "cannot connect to Modbus module at ...", once per back-off). Those lines are noise
+    in the journal here, and so is the "Repeating...." pymodbus writes in their place
+    when one comes again."""
 
+    SAID = ("No response received", "Connection to (")
     dropped = False
 
     def filter(self, record: logging.LogRecord) -> bool:
         text = str(record.getMessage())
         if text == "Repeating....":
             return not self.dropped
-        self.dropped = text.startswith("No response received")
+        # pyserial's "[Errno 2] could not open port /dev/ttyUSB0: ..." as it is
+        self.dropped = text.startswith(self.SAID) or "could not open port" in text
         return not self.dropped
 
 
-logging.getLogger("pymodbus.logging").addFilter(_NoResponseFilter())
+logging.getLogger("pymodbus.logging").addFilter(_SaidByTheDriver())
 
 _FUNCTIONS = {"input": 4, "holding": 3}
 FAULT_HOLD_S = 5.0

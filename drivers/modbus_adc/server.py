@@ -128,6 +128,11 @@ class RegisterServer:
     # -- lifecycle -----------------------------------------------------------------------
 
     def start(self, timeout: float = 5.0) -> RegisterServer:
+        """Serve; after :meth:`stop`, serve again on the same TCP port (a module powered
+        off and on again; over RTU the pty paths are new)."""
+        self._ready.clear()
+        self._error = None
+        self._bridge_stop.clear()
         if self.transport == "rtu":
             a, b = open_pty_link(), open_pty_link()
             self._links = [a, b]

@@ -76,6 +76,22 @@ def test_silent_device_detected_then_recovered() -> None:
         assert h.reconnects >= 1 and not h.extra["silent"]
 
 
+def test_unplugged_then_plugged_back_reconnects_and_streams() -> None:
+    """A pulled cable (the port vanishes, reads fail) is a disconnect that names the port;
+    plugged back in, the driver opens it again and the device streams."""
+    with Ar4000Emulator(lambda t: 5.0) as emu, DriverRunner(driver_for(emu)) as run:
+        h = run.driver.health
+        assert run.wait_for(lambda: len(run.readings) >= 5, 5)
+        emu.unplug()
+        assert run.wait_for(lambda: not h.connected and emu.port in (h.last_error or ""), 3), \
+            h.last_error
+        n = len(run.readings)
+        emu.plug()
+        assert run.wait_for(lambda: h.connected and len(run.readings) > n + 5, 5), \
+            h.last_error
+        assert h.reconnects >= 1 and distances(run)[-1] == pytest.approx(5.0, abs=0.01)
+
+
 def test_babbling_counted_and_reported() -> None:
     with Ar4000Emulator(lambda t: 6.0) as emu, DriverRunner(driver_for(emu)) as run:
         h = run.driver.health
