@@ -219,8 +219,9 @@ def run_drill(table: SignalsTable, params_path: Path, state_dir: Path,
         svc.start(zenoh_wait_s=5.0)
         stop = threading.Event()
         loop = threading.Thread(target=svc.run, args=(stop,), name="drill-loop")
-        watch = _Watch(endpoint, "drill")
+        watch: _Watch | None = None
         try:
+            watch = w = _Watch(endpoint, "drill")
             loop.start()
             if not svc.wait_drivers(15.0):
                 errors = {n: d.health.last_error for n, d in svc.drivers.items()}
@@ -255,7 +256,7 @@ def run_drill(table: SignalsTable, params_path: Path, state_dir: Path,
 
                 def named(t0: float = t0, device: str = fault.device
                           ) -> tuple[float, list[str]] | None:
-                    for t, m in watch.health_after(t0):
+                    for t, m in w.health_after(t0):
                         said = [p for p in m.get("problems") or [] if p.startswith(device + ":")]
                         if said:
                             return t, said
@@ -271,7 +272,7 @@ def run_drill(table: SignalsTable, params_path: Path, state_dir: Path,
                     # it is named
                     time.sleep(0.5)
                     since = max(t_named, t0 + cfg.loop.max_age_s + lag_s)
-                    live = [m for m in watch.live_between(since, time.monotonic())
+                    live = [m for m in w.live_between(since, time.monotonic())
                             if m.get("phase") in WEIGHING]
                     out.live_while = len(live)
                     out.numbers_while_invalid = sum(1 for m in live
@@ -286,13 +287,15 @@ def run_drill(table: SignalsTable, params_path: Path, state_dir: Path,
             overruns = svc.loop_stats.overruns - overruns0
         finally:
             stop.set()
-            loop.join(10)
+            if loop.is_alive():
+                loop.join(10)
             log_path = svc.passlog.path if svc.passlog is not None else None
             svc.close()
+            if watch is not None:
+                with watch.lock:
+                    published = len(watch.passes)
+                watch.close()
         passes_logged = len(read_passes(log_path)) if log_path is not None else 0
-        with watch.lock:
-            published = len(watch.passes)
-        watch.close()
     return Drill(outcomes, health_period_s, cfg.loop.max_age_s, ticks, seconds, overruns,
                  published, passes_logged, notes)
 
