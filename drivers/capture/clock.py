@@ -48,6 +48,8 @@ class ReplayClock:
         self.settle_timeout_s = settle_timeout_s
         self._t = float(start)
         self._m0 = time.monotonic()
+        self.held = False
+        """Paced mode: time stands still (at ``_t``) until :meth:`restart`."""
         self._cond = threading.Condition()
         self._checks: list[SettleCheck] = []
         self._listeners: list[Callable[[], None]] = []
@@ -64,19 +66,29 @@ class ReplayClock:
 
     def now(self) -> float:
         """Current capture time in seconds."""
-        if self.speed is None:
+        if self.speed is None or self.held:
             return self._t
         return self._t + (time.monotonic() - self._m0) * self.speed
 
     __call__ = now
 
     def restart(self, start: float | None = None) -> None:
-        """Paced mode: restart counting from ``start`` (default: the current time) now."""
+        """Paced mode: restart counting from ``start`` (default: the current time) now,
+        and from a :meth:`hold`."""
         with self._cond:
             self._t = self.now() if start is None else float(start)
             self._m0 = time.monotonic()
+            self.held = False
             self._cond.notify_all()
         self._notify()
+
+    def hold(self) -> None:
+        """Paced mode: stop time where it is until :meth:`restart` (a paced replay holds
+        it while the service starts: a driver whose thread is not up yet would find the
+        recording run ahead of it, its port's buffer full of stale frames)."""
+        with self._cond:
+            self._t = self.now()
+            self.held = True
 
     def add_listener(self, fn: Callable[[], None]) -> None:
         """Call ``fn()`` whenever time is moved by :meth:`advance_to` or :meth:`restart`

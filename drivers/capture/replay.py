@@ -570,7 +570,8 @@ def open_replay(capture_dir: str | os.PathLike[str], speed: float | None = 1.0, 
                 devices: list[str] | None = None,
                 responders: dict[str, Responder] | None = None, answer_window_s: float = 0.05,
                 settle_timeout_s: float = 0.5, modbus_quiet_s: float = 0.001,
-                serial_stall_s: float = 0.02, start_at: float = 0.0) -> ReplaySession:
+                serial_stall_s: float = 0.02, start_at: float = 0.0, hold: bool = False
+                ) -> ReplaySession:
     """Start replaying ``capture_dir``; connect drivers to ``session.endpoints``.
 
     ``speed``: 1.0 = recorded pace, X = X times faster, None = stepped clock (the
@@ -579,7 +580,9 @@ def open_replay(capture_dir: str | os.PathLike[str], speed: float | None = 1.0, 
     recorded-answer default. Stepped mode: ``advance`` waits at most
     ``settle_timeout_s`` for delivery; a serial port nobody reads stops counting after
     ``serial_stall_s``; a Modbus server counts as settled when it has answered at the
-    new time or has seen no request for ``modbus_quiet_s``.
+    new time or has seen no request for ``modbus_quiet_s``. ``hold``: a paced clock
+    stands at ``start_at`` until ``session.clock.restart()`` (the drivers' handshakes are
+    answered meanwhile; a stream starts when the clock does).
     """
     capture = read_capture(Path(capture_dir))
     if devices is not None:
@@ -588,6 +591,9 @@ def open_replay(capture_dir: str | os.PathLike[str], speed: float | None = 1.0, 
             raise ValueError(f"{capture_dir}: no device(s) {unknown} in the capture; it has "
                              f"{sorted(capture.devices)}")
     clock = ReplayClock(start=start_at, speed=speed, settle_timeout_s=settle_timeout_s)
+    # paced: time stands still while the feeders start (a slow machine took 0.6 s here,
+    # 3 s of a recording at 5x, pushed into ports nobody read yet and dropped)
+    clock.hold()
     session = ReplaySession(capture, clock)
     responders = responders or {}
     try:
@@ -613,5 +619,6 @@ def open_replay(capture_dir: str | os.PathLike[str], speed: float | None = 1.0, 
     except BaseException:
         session.close()
         raise
-    clock.restart(start_at)
+    if not hold:
+        clock.restart(start_at)
     return session

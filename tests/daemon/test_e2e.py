@@ -88,9 +88,14 @@ def test_committed_capture_gives_the_expected_passes_and_trucks(tmp_path: Path) 
 
 
 def test_paced_replay_through_the_virtual_hardware(tmp_path: Path, params: ModelParams) -> None:
-    """The threaded path (ptys, a Modbus TCP server, driver threads) at 5x, first pass."""
+    """The threaded path (ptys, a Modbus TCP server, driver threads) at 3x, first pass.
+
+    At 5x (until 2026-11-30) the loop must make 500 ticks a second with four driver
+    threads in the same interpreter: on this virtual machine in a slow hour it overran
+    6-12 % of them, and pass 1 came 0.6-3.2 % heavy, one run in two (at 3x: 11-79
+    overruns of 1,950 ticks, the pass within 0.1 %). The live daemon runs at 1x."""
     cfg = make_cfg(tmp_path)
-    rr = replay_service(CAPTURE, cfg, params, speed=5.0)
+    rr = replay_service(CAPTURE, cfg, params, speed=3.0)
     got: list[dict[str, Any]] = []
     rr.service.on_event = lambda k, m: got.append(m) if k == "pass" else None
     try:
@@ -100,7 +105,7 @@ def test_paced_replay_through_the_virtual_hardware(tmp_path: Path, params: Model
     finally:
         rr.close()
     check_passes(got, 1, rel=0.02)
-    assert figures["speed_x"] > 3
+    assert figures["speed_x"] > 2.5
 
 
 def test_replay_takes_the_capture_folders_own_params(tmp_path: Path) -> None:
