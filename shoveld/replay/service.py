@@ -205,7 +205,7 @@ def replay_service(capture_dir: str | Path, cfg: DaemonConfig, params: ModelPara
     # paced: the recording waits for the service to start (ReplayRun.run starts it); its
     # drivers' handshakes are answered meanwhile. Until 2026-11-30 it ran from here, and
     # on a slow machine the MTi's stream filled its port before the driver read it (the
-    # paced test of the committed capture failed 1 run in 3: pass 1 weighed 4 % heavy).
+    # paced test of the committed capture failed 1 run in 3: pass 1 up to 7 % heavy).
     session = open_replay(capture_dir, speed=speed, hold=speed is not None, **replay_kw)
     try:
         cap = session.capture
