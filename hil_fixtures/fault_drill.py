@@ -24,11 +24,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from hil_fixtures.regress import free_port
 from hil_fixtures.virtual_shovel import VirtualShovel
+from shoveld.cycle.phases import ESTIMATING, PHASES
 from shoveld.signals.table import SignalsTable
 
 
-def _wrong_protocol(answer: bytes) -> bytes:
+def wrong_protocol(answer: bytes) -> bytes:
     """A Modbus TCP answer as a device speaking another protocol on the port sends it."""
     return answer[:2] + b"\x12\x34" + answer[4:]
 
@@ -50,10 +52,10 @@ class Fault:
     invalidates: bool = True
     """While it lasts, the device's inputs are invalid (a module answering late still
     gives most of its readings)."""
-
-
-def _mti(vs: VirtualShovel) -> Any:
-    return vs.mti
+    says: str = ""
+    """Words the device's entry must hold to count as naming this fault (a module
+    answering late is first "not answering", from its timeouts, before a late answer
+    lands and health says what it is); empty: any entry of the device."""
 
 
 def _laser(vs: VirtualShovel) -> Any:
@@ -75,13 +77,14 @@ FAULTS: tuple[Fault, ...] = (
           lambda vs: vs.adc_motors.start()),
     Fault("Modbus module silent", "adc_motors", _set(_adc, "silent", True),
           _set(_adc, "silent", False)),
-    Fault("Modbus module babbling", "adc_motors", _set(_adc, "garble", _wrong_protocol),
+    Fault("Modbus module babbling", "adc_motors", _set(_adc, "garble", wrong_protocol),
           _set(_adc, "garble", None)),
     Fault("Modbus module answering late", "adc_motors", _set(_adc, "delay_s", 0.3),
-          _set(_adc, "delay_s", 0.0), invalidates=False),
+          _set(_adc, "delay_s", 0.0), invalidates=False, says="answering after its timeout"),
 )
 PASS_PHASES = frozenset({"dig", "lift", "swing", "dump"})
-WEIGHING = frozenset({"lift", "swing"})
+WEIGHING = frozenset(PHASES[p] for p in ESTIMATING)
+"""The phases whose live estimate is being weighed (lift, swing): the engine's."""
 
 
 @dataclass
@@ -92,8 +95,8 @@ class Outcome:
     phase: str
     """The engine's phase when it was made."""
     latency_s: float | None
-    """From the fault to the first health message naming its device (None: not named
-    within the drill's wait)."""
+    """From the fault to the first health message naming it (its device, with the
+    fault's ``says``; None: not named within the drill's wait)."""
     named: list[str]
     """That message's problems about the device."""
     numbers_while_invalid: int = 0
@@ -168,15 +171,6 @@ class _Watch:
         self.session.close()
 
 
-def _wait(pred: Callable[[], bool], timeout: float, poll_s: float = 0.005) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if pred():
-            return True
-        time.sleep(poll_s)
-    return pred()
-
-
 def cycles(passes: int = 8, seed: int = 11) -> SignalsTable:
     """Dig cycles enough for a drill: a fault every pass or two, each made in a pass."""
     from shoveld.sim.scenario import simulate_cycles
@@ -184,22 +178,14 @@ def cycles(passes: int = 8, seed: int = 11) -> SignalsTable:
     return simulate_cycles(passes, seed=seed, truck_target_kg=62000.0).table
 
 
-def _free_port() -> int:
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 def run_drill(table: SignalsTable, params_path: Path, state_dir: Path,
               faults: tuple[Fault, ...] = FAULTS, health_period_s: float = 1.0,
               name_wait_s: float = 10.0, clear_wait_s: float = 20.0, seed: int = 1) -> Drill:
     """Start the daemon on a virtual shovel playing ``table``, make each fault in a pass,
     and measure (see the module's docstring)."""
-    from shoveld.cycle.phases import PHASES
     from shoveld.daemon.config import parse_config
     from shoveld.daemon.persist import read_passes
+    from shoveld.daemon.publisher import wait_until
     from shoveld.daemon.service import Service
     from shoveld.model.params import load_params
 
@@ -208,7 +194,7 @@ def run_drill(table: SignalsTable, params_path: Path, state_dir: Path,
     with VirtualShovel(table) as vs:
         # the port drawn once the emulators' servers have theirs (drawn before, the OS
         # once gave it to a Modbus server)
-        endpoint = f"tcp/127.0.0.1:{_free_port()}"
+        endpoint = f"tcp/127.0.0.1:{free_port()}"
         vc = vs.config()
         cfg = parse_config({"shovel": {"id": "drill", "params": str(params_path),
                                        "state_dir": str(state_dir)},
@@ -231,7 +217,7 @@ def run_drill(table: SignalsTable, params_path: Path, state_dir: Path,
                 h = svc.health_msg
                 return bool(h and h.get("ok"))
 
-            if not _wait(clear_health, clear_wait_s):
+            if not wait_until(clear_health, clear_wait_s, 0.005):
                 raise RuntimeError(f"health not clear: {svc.health_msg}")
             t_start, ticks0 = time.monotonic(), svc.loop_stats.ticks
             overruns0 = svc.loop_stats.overruns
@@ -248,21 +234,25 @@ def run_drill(table: SignalsTable, params_path: Path, state_dir: Path,
                 # a moment drawn within the health period, so that the fault does not
                 # always come just after a health message
                 time.sleep(rng.uniform(0.0, health_period_s))
-                if not _wait(lambda: phase() in PASS_PHASES, 60.0, 0.01):
-                    notes.append(f"{fault.name}: no pass under way within 60 s; made anyway")
+                # a fault that makes inputs invalid comes while the pass is weighed, so
+                # that the live estimates it could spoil are there to be checked
+                phases = WEIGHING if fault.invalidates else PASS_PHASES
+                if not wait_until(lambda ph=phases: phase() in ph, 60.0, 0.01):
+                    notes.append(f"{fault.name}: not in {sorted(phases)} within 60 s; made "
+                                 "anyway")
                 ph = phase()
                 fault.make(vs)
                 t0 = time.monotonic()
 
-                def named(t0: float = t0, device: str = fault.device
-                          ) -> tuple[float, list[str]] | None:
+                def named(t0: float = t0, f: Fault = fault) -> tuple[float, list[str]] | None:
                     for t, m in w.health_after(t0):
-                        said = [p for p in m.get("problems") or [] if p.startswith(device + ":")]
-                        if said:
+                        said = [p for p in m.get("problems") or []
+                                if p.startswith(f.device + ":")]
+                        if said and f.says in " ".join(said):
                             return t, said
                     return None
 
-                _wait(lambda: named() is not None, name_wait_s)
+                wait_until(lambda: named() is not None, name_wait_s, 0.005)
                 got = named()
                 t_named = got[0] if got else None
                 out = Outcome(fault.name, ph, None if got is None else got[0] - t0,
@@ -279,7 +269,7 @@ def run_drill(table: SignalsTable, params_path: Path, state_dir: Path,
                                                     if m.get("payload_kg") is not None)
                 fault.clear(vs)
                 outcomes.append(out)
-                if not _wait(clear_health, clear_wait_s, 0.02):
+                if not wait_until(clear_health, clear_wait_s, 0.02):
                     notes.append(f"{fault.name}: health not clear {clear_wait_s:g} s after "
                                  f"it was cleared: {(svc.health_msg or {}).get('problems')}")
             seconds = time.monotonic() - t_start

@@ -31,7 +31,9 @@ CAPTURES = Path(__file__).resolve().parent / "captures"
 RATED_KG = 35000.0
 
 
-def _free_port() -> int:
+def free_port() -> int:
+    """A free TCP port on 127.0.0.1 (the OS's choice) for a replay's or a drill's
+    Zenoh listener."""
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
@@ -47,7 +49,7 @@ def replay(capture: Path, truck_target_kg: float) -> dict[str, list[dict[str, An
     with tempfile.TemporaryDirectory() as state:
         cfg = parse_config({
             "shovel": {"id": "regress", "params": str(params_path), "state_dir": state},
-            "zenoh": {"listen": [f"tcp/127.0.0.1:{_free_port()}"]},
+            "zenoh": {"listen": [f"tcp/127.0.0.1:{free_port()}"]},
             "truck": {"target_kg": truck_target_kg}}, "<regress>", require_devices=False)
         rr = fast_replay_service(capture, cfg, load_params(params_path))
         got: dict[str, list[dict[str, Any]]] = {"pass": [], "truck": []}

@@ -49,9 +49,9 @@ class ReplayRun:
         stop = stop or threading.Event()
         svc = self.service
         paced = self.speed is not None and svc.driver_threads
-        held = getattr(self.session, "clock", None)
-        if getattr(held, "held", False):  # the recording starts now (replay_service)
-            held.restart()
+        recording = getattr(self.session, "clock", None)
+        if getattr(recording, "held", False):  # it starts now (replay_service held it)
+            recording.restart()
         if self.speed is None and svc.driver_threads and hasattr(self.session,
                                                                   "wait_connected"):
             # stepped: the replay moves time at about real pace while drivers connect

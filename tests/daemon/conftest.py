@@ -7,7 +7,6 @@ import socket
 import subprocess
 import sys
 import threading
-import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -15,6 +14,7 @@ from typing import Any
 import pytest
 
 from shoveld.daemon.config import DaemonConfig, TlsConfig, parse_config
+from shoveld.daemon.publisher import wait_until
 from shoveld.model.params import ModelParams, load_params
 from shoveld.signals.table import SignalsTable
 
@@ -64,12 +64,7 @@ def make_cfg(tmp_path: Path, port: int | None = None, **sections: Any) -> Daemon
 
 def wait_for(pred: Callable[[], bool], timeout: float, poll_s: float = 0.05) -> bool:
     """Poll ``pred`` until it holds or ``timeout`` passes; its last value."""
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if pred():
-            return True
-        time.sleep(poll_s)
-    return pred()
+    return wait_until(pred, timeout, poll_s)
 
 
 class Site:

@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 from drivers.base import DeviceError
 from drivers.capture.format import RegisterRead
 from drivers.modbus_adc import Channel, ChannelMap, ModbusAdcConfig, ModbusAdcDriver
+from hil_fixtures.fault_drill import wrong_protocol
 from hil_fixtures.modbus_adc import ModbusAdcEmulator, source_from_table
 from hil_fixtures.virtual_shovel import MOTOR_CHANNELS, DriverRunner
 from shoveld.signals import SignalsTable
@@ -166,11 +167,6 @@ def test_module_that_stops_answering(transport: str) -> None:
         assert all(c["state"] == "ok" and not c["stale"] for c in chans.values())
 
 
-def _wrong_protocol_id(answer: bytes) -> bytes:
-    """A TCP answer from a device that speaks another protocol on port 502."""
-    return answer[:2] + b"\x12\x34" + answer[4:]
-
-
 def _noise(answer: bytes) -> bytes:
     """An RTU answer with one bit flipped on the line, in its first register."""
     return answer[:4] + bytes([answer[4] ^ 0x10]) + answer[5:]
@@ -190,7 +186,7 @@ def test_a_module_that_babbles_is_named_in_health(transport: str,
         h = run.driver.health
         assert run.wait_for(lambda: len(run.readings) >= 5, 5)
         assert h.bad_frames == 0 and not h.extra["babbling"]
-        emu.server.garble = _wrong_protocol_id if transport == "tcp" else _noise
+        emu.server.garble = wrong_protocol if transport == "tcp" else _noise
         with caplog.at_level(logging.DEBUG):
             assert run.wait_for(lambda: h.bad_frames >= 5 and h.extra["babbling"], 5)
         what = "not Modbus TCP (protocol id 4660)" if transport == "tcp" else "CRC is wrong"
