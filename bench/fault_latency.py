@@ -11,7 +11,7 @@ published as numbers while the fault's inputs were invalid (goal 0), the loop's 
 overruns, and the passes published against those in the pass log (goal: none lost).
 
 Usage: ``.venv/bin/python bench/fault_latency.py [--runs 3] [--health-period 1.0]``
-(about 45 s a run, and the table of cycles first)
+(about 100 s a run, and the table of cycles first)
 """
 
 from __future__ import annotations

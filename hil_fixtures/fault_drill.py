@@ -4,8 +4,9 @@ Issue 12 asks that health name a sensor fault "within one health period", the lo
 its rate, estimates made without valid inputs not be published as numbers, and no
 finished pass be lost. The drill runs the whole daemon (:class:`Service`) on the
 virtual shovel's emulators at real time, with a Zenoh subscriber in this process as a
-cab would be, and makes each fault of :data:`FAULTS` while a pass is under way (the
-engine's phase is dig, lift, swing or dump), then clears it and waits for health to be
+cab would be, and makes each fault of :data:`FAULTS` while a pass is under way (one
+that makes its device's inputs invalid while the pass is weighed, in lift or swing; the
+other in dig, lift, swing or dump), then clears it and waits for health to be
 clear again. For each it measures the time from the fault to the arrival of the first
 health message naming its device, and counts the live estimates published as numbers
 while the fault's inputs were invalid. ``tests/daemon/test_fault_drill.py`` holds the

@@ -2,7 +2,7 @@
 health period of the moment it can be seen, live estimates are not numbers while their
 inputs are invalid, the loop keeps its rate, and no finished pass is lost (issue 12).
 
-One drill (``hil_fixtures/fault_drill.py``, about 50 s): the MTi unplugged and silent, the
+One drill (``hil_fixtures/fault_drill.py``, about 100 s): the MTi unplugged and silent, the
 laser unplugged, silent and babbling, a Modbus module powered off, silent, babbling and
 answering after its timeout, each made at a moment drawn within a health period while a
 pass is under way; ``bench/fault_latency.py`` prints the figures of several.
