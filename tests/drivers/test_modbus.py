@@ -222,7 +222,10 @@ def test_a_module_that_answers_after_the_timeout_is_named_in_health(
         assert not h.extra["answering_late"]
         emu.server.delay_s = 0.3  # the driver's timeout is 0.05 s
         with caplog.at_level(logging.DEBUG):
-            assert run.wait_for(lambda: h.extra["late_answers"] >= 3, 5)
+            # an answer is counted late only when it lands in a later request's wait;
+            # on a loaded machine fewer do (at 5 s, 3 of 8 runs had fewer than three
+            # beside three busy processes on two cores, 2026-11-30)
+            assert run.wait_for(lambda: h.extra["late_answers"] >= 3, 20), h.extra
         assert h.extra["answering_late"] and "answers after the 0.05 s timeout" in \
             h.last_error
         said = problems({"adc": {"state": "ok", **h.extra}}, {}, {"open": True}, {})

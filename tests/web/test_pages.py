@@ -138,12 +138,22 @@ def test_the_cab_page_shows_the_truck_and_what_is_left(run: Run) -> None:
 def test_the_cab_page_says_when_a_sensor_is_unplugged(run: Run) -> None:
     b = run.browser
     b.get(run.page.url)
-    assert wait_for(lambda: run.text("health") == "all sensors ok", 20.0), run.text("health")
+
+    def sensors_named() -> list[str]:
+        """The devices the page's health strip names. Not "all sensors ok" itself: on a
+        loaded two-core machine the daemon's loop at 3x real time beside the browser
+        overruns now and then, and the strip says that too ("loop: 9 overruns in the
+        last 45 ticks"), for as long as it lasts."""
+        text = run.text("health")
+        return [d for d in run.svc.cfg.devices if f"{d}:" in text]
+
+    assert wait_for(lambda: run.text("health") != "" and not sensors_named(), 20.0), \
+        run.text("health")
     run.vs.mti.unplug()
-    assert wait_for(lambda: "mti" in run.text("health"), 5.0), run.text("health")
+    assert wait_for(lambda: sensors_named() == ["mti"], 5.0), run.text("health")
     assert "bad" in (b.find_element("id", "health").get_attribute("class") or "")
     run.vs.mti.plug()
-    assert wait_for(lambda: run.text("health") == "all sensors ok", 15.0), run.text("health")
+    assert wait_for(lambda: not sensors_named(), 15.0), run.text("health")
 
 
 def test_the_office_page_marks_a_silent_shovel(run: Run) -> None:

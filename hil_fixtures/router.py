@@ -1,0 +1,66 @@
+"""A site's Zenoh router as a process of its own, to start, stop and start again.
+
+The daemon's tests and the fault drill need a router that goes away the way a real one
+does (its process ends, its sockets close) and comes back on the same endpoint: a
+Zenoh session in router mode in a child interpreter, stopped by closing its stdin.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+ROUTER = """
+import json, sys, zenoh
+if sys.argv[1].endswith(".json5"):
+    c = zenoh.Config.from_file(sys.argv[1])
+else:
+    c = zenoh.Config()
+    c.insert_json5("mode", '"router"')
+    c.insert_json5("listen/endpoints", json.dumps([sys.argv[1]]))
+    c.insert_json5("scouting/multicast/enabled", "false")
+s = zenoh.open(c)
+print("up", flush=True)
+sys.stdin.read()
+s.close()
+"""
+
+
+def start_router(endpoint_or_config: str | Path) -> subprocess.Popen[str]:
+    """A router process (a plain ``tcp/`` one on an endpoint, or from a config file
+    ``*.json5``), once it listens; stop it with ``communicate("")``."""
+    r = subprocess.Popen([sys.executable, "-c", ROUTER, str(endpoint_or_config)],
+                         stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    assert r.stdout is not None
+    line = r.stdout.readline().strip()
+    if line != "up":
+        r.kill()
+        r.wait()
+        raise RuntimeError(f"the router on {endpoint_or_config} did not start ({line!r})")
+    return r
+
+
+class Router:
+    """A router on one endpoint that can be stopped and started again (a site router
+    restarted, or switched off and on)."""
+
+    def __init__(self, endpoint_or_config: str | Path) -> None:
+        self.where = endpoint_or_config
+        self.proc: subprocess.Popen[str] | None = None
+
+    def start(self) -> Router:
+        if self.proc is None:
+            self.proc = start_router(self.where)
+        return self
+
+    def stop(self) -> None:
+        proc, self.proc = self.proc, None
+        if proc is not None:
+            proc.communicate("", timeout=10)
+
+    def __enter__(self) -> Router:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
