@@ -13,15 +13,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import socket
 import statistics
 import time
 
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
+from hil_fixtures.net import free_port
 
 
 def main() -> None:

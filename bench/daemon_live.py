@@ -36,7 +36,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import socket
 import subprocess
 import sys
 import tempfile
@@ -46,6 +45,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from hil_fixtures.net import free_port
 
 ROOT = Path(__file__).resolve().parents[1]
 PARAMS = ROOT / "hil_fixtures" / "captures" / "daemon-e2e" / "params.toml"
@@ -77,12 +78,6 @@ v = np.array(lat[50:]) * 1e3
 print(json.dumps({"n": len(v), "p50": float(np.percentile(v, 50)),
                   "p99": float(np.percentile(v, 99)), "max": float(v.max())}), flush=True)
 """
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def pct(v: list[float] | np.ndarray, scale: float = 1e3) -> dict[str, float]:

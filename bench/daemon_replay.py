@@ -41,6 +41,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from hil_fixtures.net import free_port
+
 ROOT = Path(__file__).resolve().parents[1]
 CAPTURE = ROOT / "hil_fixtures" / "captures" / "daemon-e2e"
 PARAMS = CAPTURE / "params.toml"
@@ -54,14 +56,6 @@ def timed(acc: dict[str, float], name: str, fn: Callable[..., Any]) -> Callable[
         finally:
             acc[name] = acc.get(name, 0.0) + time.perf_counter() - t0
     return wrapper
-
-
-def free_port() -> int:
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def run_once(stepped: bool, breakdown: bool, subscriber: bool = False, bulk: bool = True

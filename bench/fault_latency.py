@@ -1,9 +1,11 @@
-"""How soon health names a sensor fault made during a pass, on the live daemon (issue 12).
+"""How soon health names a sensor or network fault made during a pass, on the live daemon
+(issue 12).
 
 Each drill (``hil_fixtures/fault_drill.py``) runs the daemon on the virtual shovel's
-emulators at real time and makes each fault while a pass is under way: the MTi
-unplugged and silent, the laser unplugged, silent and babbling, a Modbus module powered
-off, silent, babbling and answering after its timeout. It prints, per fault, the time
+emulators at real time, connected to a site router, and makes each fault while a pass is
+under way: the MTi unplugged and silent, the laser unplugged, silent and babbling, a
+Modbus module powered off, silent, babbling and answering after its timeout, and the
+site's router gone (its process ended). It prints, per fault, the time
 from the fault to the arrival of the first health message naming its device (at a
 Zenoh subscriber, as a cab), in seconds and against the bound the issue sets (one health
 period after the fault can be seen: the device's ``max_age_s``), the live estimates

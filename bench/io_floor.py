@@ -41,6 +41,8 @@ import threading
 import time
 from collections.abc import Callable
 
+from hil_fixtures.net import free_port
+
 MTI_HZ, LASER_HZ, POLL_HZ, TICK_HZ = 100.0, 50.0, 50.0, 100.0
 MTI_BYTES, LASER_BYTES, REQUEST_BYTES, ANSWER_BYTES = 80, 12, 12, 23
 
@@ -152,12 +154,6 @@ def run_selector(fds: tuple[int, int], socks: list[socket.socket], until: float)
             for s in socks:
                 s.send(b"q" * REQUEST_BYTES)
     sel.close()
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def one_run(shape: str, seconds: float, puts: int = 0) -> tuple[float, float]:

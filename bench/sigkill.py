@@ -37,7 +37,6 @@ import os
 import random
 import re
 import signal
-import socket
 import sqlite3
 import subprocess
 import sys
@@ -48,15 +47,13 @@ from collections import Counter
 from pathlib import Path
 from typing import Any
 
+from hil_fixtures.net import free_port
+
 ROOT = Path(__file__).resolve().parents[1]
 CAPTURE = ROOT / "hil_fixtures" / "captures" / "daemon-e2e"
 KINDS = ("start-up", "in a pass", "in a commit", "shut-down")
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 class Run:

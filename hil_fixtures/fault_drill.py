@@ -1,16 +1,18 @@
-"""Sensor faults made during passes on a live virtual shovel, and how soon health names them.
+"""Sensor and network faults made during passes on a live virtual shovel, and how soon
+health names them.
 
 Issue 12 asks that health name a sensor fault "within one health period", the loop keep
 its rate, estimates made without valid inputs not be published as numbers, and no
 finished pass be lost. The drill runs the whole daemon (:class:`Service`) on the
-virtual shovel's emulators at real time, with a Zenoh subscriber in this process as a
-cab would be, and makes each fault of :data:`FAULTS` while a pass is under way (one
-that makes its device's inputs invalid while the pass is weighed, in lift or swing; the
-other in dig, lift, swing or dump), then clears it and waits for health to be
-clear again. For each it measures the time from the fault to the arrival of the first
-health message naming its device, and counts the live estimates published as numbers
-while the fault's inputs were invalid. ``tests/daemon/test_fault_drill.py`` holds the
-bound on one drill; ``bench/fault_latency.py`` prints the figures of several.
+virtual shovel's emulators at real time, connected to a site router (its own process),
+with a Zenoh subscriber in this process beside it as a cab would be, and makes each
+fault of :data:`FAULTS` while a pass is under way (one that makes its device's inputs
+invalid while the pass is weighed, in lift or swing; the other in dig, lift, swing or
+dump), then clears it and waits for health to be clear again. For each it measures the
+time from the fault to the arrival of the first health message naming its device, and
+counts the live estimates published as numbers while the fault's inputs were invalid.
+``tests/daemon/test_fault_drill.py`` holds the bound on one drill;
+``bench/fault_latency.py`` prints the figures of several.
 """
 
 from __future__ import annotations
@@ -25,7 +27,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from hil_fixtures.regress import free_port
+from hil_fixtures.net import free_port
+from hil_fixtures.router import Router
 from hil_fixtures.virtual_shovel import VirtualShovel
 from shoveld.cycle.phases import ESTIMATING, PHASES
 from shoveld.signals.table import SignalsTable
@@ -36,20 +39,28 @@ def wrong_protocol(answer: bytes) -> bytes:
     return answer[:2] + b"\x12\x34" + answer[4:]
 
 
-def _set(obj: Callable[[VirtualShovel], Any], attr: str, value: Any
-         ) -> Callable[[VirtualShovel], None]:
-    return lambda vs: setattr(obj(vs), attr, value)
+@dataclass(frozen=True)
+class Rig:
+    """What the drill makes its faults in: the virtual shovel and the site's router."""
+
+    shovel: VirtualShovel
+    router: Router
+
+
+def _set(obj: Callable[[Rig], Any], attr: str, value: Any) -> Callable[[Rig], None]:
+    return lambda rig: setattr(obj(rig), attr, value)
 
 
 @dataclass(frozen=True)
 class Fault:
-    """One fault of one device, made and cleared on the virtual shovel."""
+    """One fault of one device (or of the site network), made and cleared on the rig."""
 
     name: str
     device: str
-    """The device whose entry in health's problems names it (``"mti: ..."``)."""
-    make: Callable[[VirtualShovel], None]
-    clear: Callable[[VirtualShovel], None]
+    """The device whose entry in health's problems names it (``"mti: ..."``; the site
+    network's, ``"zenoh: ..."``)."""
+    make: Callable[[Rig], None]
+    clear: Callable[[Rig], None]
     invalidates: bool = True
     """While it lasts, the device's inputs are invalid (a module answering late still
     gives most of its readings)."""
@@ -59,29 +70,35 @@ class Fault:
     lands and health says what it is); empty: any entry of the device."""
 
 
-def _laser(vs: VirtualShovel) -> Any:
-    return vs.laser
+def _mti(rig: Rig) -> Any:
+    return rig.shovel.mti
 
 
-def _adc(vs: VirtualShovel) -> Any:
-    return vs.adc_motors.server
+def _laser(rig: Rig) -> Any:
+    return rig.shovel.laser
+
+
+def _adc(rig: Rig) -> Any:
+    return rig.shovel.adc_motors.server
 
 
 FAULTS: tuple[Fault, ...] = (
-    Fault("MTi unplugged", "mti", lambda vs: vs.mti.unplug(), lambda vs: vs.mti.plug()),
-    Fault("MTi silent", "mti", lambda vs: vs.mti.go_silent(), lambda vs: vs.mti.come_back()),
-    Fault("laser unplugged", "laser", lambda vs: _laser(vs).unplug(),
-          lambda vs: _laser(vs).plug()),
+    Fault("MTi unplugged", "mti", lambda r: _mti(r).unplug(), lambda r: _mti(r).plug()),
+    Fault("MTi silent", "mti", lambda r: _mti(r).go_silent(), lambda r: _mti(r).come_back()),
+    Fault("laser unplugged", "laser", lambda r: _laser(r).unplug(),
+          lambda r: _laser(r).plug()),
     Fault("laser silent", "laser", _set(_laser, "silent", True), _set(_laser, "silent", False)),
     Fault("laser babbling", "laser", _set(_laser, "babble", 1.0), _set(_laser, "babble", 0.0)),
-    Fault("Modbus module powered off", "adc_motors", lambda vs: vs.adc_motors.stop(),
-          lambda vs: vs.adc_motors.start()),
+    Fault("Modbus module powered off", "adc_motors", lambda r: r.shovel.adc_motors.stop(),
+          lambda r: r.shovel.adc_motors.start()),
     Fault("Modbus module silent", "adc_motors", _set(_adc, "silent", True),
           _set(_adc, "silent", False)),
     Fault("Modbus module babbling", "adc_motors", _set(_adc, "garble", wrong_protocol),
           _set(_adc, "garble", None)),
     Fault("Modbus module answering late", "adc_motors", _set(_adc, "delay_s", 0.3),
           _set(_adc, "delay_s", 0.0), invalidates=False, says="answering after its timeout"),
+    Fault("site router gone", "zenoh", lambda r: r.router.stop(), lambda r: r.router.start(),
+          invalidates=False, says="cannot reach"),
 )
 PASS_PHASES = frozenset({"dig", "lift", "swing", "dump"})
 WEIGHING = frozenset(PHASES[p] for p in ESTIMATING)
@@ -192,15 +209,18 @@ def run_drill(table: SignalsTable, params_path: Path, state_dir: Path,
 
     outcomes: list[Outcome] = []
     notes: list[str] = []
-    with VirtualShovel(table) as vs:
-        # the port drawn once the emulators' servers have theirs (drawn before, the OS
-        # once gave it to a Modbus server)
+    with VirtualShovel(table) as vs, Router(f"tcp/127.0.0.1:{free_port()}") as router:
+        # the ports drawn once the emulators' servers have theirs (drawn before, the OS
+        # once gave one to a Modbus server). The daemon is a peer that listens for the
+        # drill's watch (a cab on the shovel's own switch, which hears it whatever the
+        # site network does) and connects to the site's router.
+        rig = Rig(vs, router)
         endpoint = f"tcp/127.0.0.1:{free_port()}"
         vc = vs.config()
         cfg = parse_config({"shovel": {"id": "drill", "params": str(params_path),
                                        "state_dir": str(state_dir)},
                             "loop": {"health_period_s": health_period_s},
-                            "zenoh": {"listen": [endpoint]},
+                            "zenoh": {"listen": [endpoint], "connect": [str(router.where)]},
                             "installation": vc["installation"], "devices": vc["devices"]})
         svc = Service(cfg, load_params(params_path))
         svc.start(zenoh_wait_s=5.0)
@@ -242,7 +262,7 @@ def run_drill(table: SignalsTable, params_path: Path, state_dir: Path,
                     notes.append(f"{fault.name}: not in {sorted(phases)} within 60 s; made "
                                  "anyway")
                 ph = phase()
-                fault.make(vs)
+                fault.make(rig)
                 t0 = time.monotonic()
 
                 def named(t0: float = t0, f: Fault = fault) -> tuple[float, list[str]] | None:
@@ -268,7 +288,7 @@ def run_drill(table: SignalsTable, params_path: Path, state_dir: Path,
                     out.live_while = len(live)
                     out.numbers_while_invalid = sum(1 for m in live
                                                     if m.get("payload_kg") is not None)
-                fault.clear(vs)
+                fault.clear(rig)
                 outcomes.append(out)
                 if not wait_until(clear_health, clear_wait_s, 0.02):
                     notes.append(f"{fault.name}: health not clear {clear_wait_s:g} s after "

@@ -21,22 +21,17 @@ from __future__ import annotations
 
 import argparse
 import json
-import socket
 import tempfile
 import threading
 from pathlib import Path
 from typing import Any
 
+from hil_fixtures.net import free_port
+
 CAPTURES = Path(__file__).resolve().parent / "captures"
 RATED_KG = 35000.0
 
 
-def free_port() -> int:
-    """A free TCP port on 127.0.0.1 (the OS's choice) for a replay's or a drill's
-    Zenoh listener."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def replay(capture: Path, truck_target_kg: float) -> dict[str, list[dict[str, Any]]]:

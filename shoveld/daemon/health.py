@@ -114,6 +114,11 @@ def problems(drivers: Mapping[str, dict[str, Any]], loop: dict[str, Any],
                 out.append(f"{name}: channels {', '.join(bad)} not answering")
     if not zenoh.get("open"):
         out.append(f"zenoh: session not open ({zenoh.get('last_error') or 'connecting'})")
+    elif zenoh.get("unreached_s") is not None:
+        # the site's router gone (or its link): nobody off the shovel hears it, but the
+        # health message is kept (status, the log) and a peer beside it still hears it
+        out.append(f"zenoh: cannot reach {', '.join(zenoh.get('connect') or [])} for "
+                   f"{zenoh['unreached_s']:.1f} s: passes are kept in the pass log")
     if persist.get("last_error"):
         out.append(f"pass log: {persist['last_error']}")
     if loop.get("failing_now"):

@@ -116,6 +116,10 @@ class Publisher:
         self.opened = threading.Event()
         self._links: tuple[float, dict[str, int]] | None = None
         """(host time, the routers and peers then) of :meth:`health`."""
+        self._had_router = False
+        self.unreached_since: float | None = None
+        """Host time since when nothing is reached through ``connect`` (None: reached,
+        or nothing to connect to): see :meth:`_watch_links`."""
 
     def key(self, topic: str) -> str:
         return f"{self.base}/{topic}"
@@ -290,9 +294,39 @@ class Publisher:
                                          "peers": len(list(s.info.peers_zid()))})
                 except Exception:  # noqa: BLE001
                     self._links = None
+                else:
+                    self._watch_links(now, **self._links[1])
             if self._links is not None:
                 d.update(self._links[1])
+            if self.cfg.connect:
+                d["connect"] = list(self.cfg.connect)
+                since = self.unreached_since
+                d["unreached_s"] = None if since is None else round(now - since, 1)
         return d
+
+    def _watch_links(self, now: float, routers: int, peers: int) -> None:
+        """Whether the session reaches what ``connect`` names, said once in the log when
+        that is lost and once when it is back. A client reaches only routers; a peer
+        that has had a router must keep one (the cab beside it, a peer, does not carry
+        the passes to the office); a peer that never had one, any peer. A router whose
+        process ends is seen at once (its sockets close); one cut off the network only
+        when Zenoh's lease on its link runs out (``transport/link/tx/lease``, 10 s, the
+        router's own: docs/faults.md)."""
+        if not self.cfg.connect:
+            return
+        self._had_router = self._had_router or routers > 0
+        reached = routers > 0 or (self.cfg.mode != "client" and not self._had_router
+                                  and peers > 0)
+        since = self.unreached_since
+        if not reached and since is None:
+            self.unreached_since = now
+            log.warning("zenoh: cannot reach %s: nothing goes through it to the screens "
+                        "and the office; passes are kept in the pass log",
+                        ", ".join(self.cfg.connect))
+        elif reached and since is not None:
+            self.unreached_since = None
+            log.info("zenoh: %s reached again after %.1f s", ", ".join(self.cfg.connect),
+                     now - since)
 
     LINKS_MAX_AGE_S = 0.5
     """How long the routers and peers counted for :meth:`health` are reused (host

@@ -3,9 +3,6 @@
 from __future__ import annotations
 
 import json
-import socket
-import subprocess
-import sys
 import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -13,6 +10,7 @@ from typing import Any
 
 import pytest
 
+from hil_fixtures.net import free_port
 from shoveld.daemon.config import DaemonConfig, TlsConfig, parse_config
 from shoveld.daemon.publisher import wait_until
 from shoveld.model.params import ModelParams, load_params
@@ -23,14 +21,6 @@ CAPTURE = ROOT / "hil_fixtures" / "captures" / "daemon-e2e"
 PARAMS = CAPTURE / "params.toml"
 
 
-def free_port() -> int:
-    """A free TCP port on 127.0.0.1 (never 7447, which the demo uses)."""
-    while True:
-        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-            s.bind(("127.0.0.1", 0))
-            port = s.getsockname()[1]
-        if port != 7447:
-            return port
 
 
 @pytest.fixture(scope="session")
@@ -102,31 +92,6 @@ class Site:
 @pytest.fixture(scope="session")
 def site(tmp_path_factory: pytest.TempPathFactory) -> Site:
     return Site(tmp_path_factory.mktemp("pki"))
-
-
-ROUTER = """
-import json, sys, time, zenoh
-if sys.argv[1].endswith(".json5"):
-    c = zenoh.Config.from_file(sys.argv[1])
-else:
-    c = zenoh.Config()
-    c.insert_json5("mode", '"router"')
-    c.insert_json5("listen/endpoints", json.dumps([sys.argv[1]]))
-    c.insert_json5("scouting/multicast/enabled", "false")
-s = zenoh.open(c)
-print("up", flush=True)
-sys.stdin.read()
-s.close()
-"""
-
-
-def start_router(endpoint_or_config: str | Path) -> subprocess.Popen[str]:
-    """A router process (a plain ``tcp/`` one on an endpoint, or from a config file
-    ``*.json5``), once it listens; stop it with ``communicate("")``."""
-    r = subprocess.Popen([sys.executable, "-c", ROUTER, str(endpoint_or_config)],
-                         stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
-    assert r.stdout is not None and r.stdout.readline().strip() == "up"
-    return r
 
 
 class Collector:

@@ -9,17 +9,24 @@ its own certificate; the cabs and the office are clients too, with theirs.
 from __future__ import annotations
 
 import json
+import logging
 import threading
 import time
 from pathlib import Path
 from typing import Any
 
+import pytest
+import zenoh
+
+from hil_fixtures.router import Router, start_router
 from shoveld.cli.cab import CabClient, CabState
+from shoveld.daemon.health import problems
+from shoveld.daemon.publisher import Publisher, zenoh_config
 from shoveld.model.params import ModelParams
 from shoveld.replay.table import table_service
 from shoveld.signals.table import SignalsTable
 
-from .conftest import Collector, Site, free_port, make_cfg, start_router, wait_for
+from .conftest import Collector, Site, free_port, make_cfg, wait_for
 
 CAB_CERTS = {"s1-a": "cab-s1", "s1-b": "cab-s1b", "s2-a": "cab-s2"}
 
@@ -128,3 +135,52 @@ def test_cab_catches_up_on_passes_made_while_the_router_was_down(
         if svc is not None:
             svc.close()
         router.communicate("", timeout=10)
+
+
+def _unreached(pub: Publisher) -> list[str]:
+    """The daemon's problems about Zenoh, from its publisher's health as it sends it."""
+    return [p for p in problems({}, {}, pub.health(), {}) if p.startswith("zenoh:")]
+
+
+@pytest.mark.parametrize("mode", ["client", "peer"])
+def test_a_router_that_goes_away_is_named_and_said_once_in_the_log(
+        tmp_path: Path, mode: str, caplog: pytest.LogCaptureFixture) -> None:
+    """A site router whose process ends is named in health at the next health message
+    (its sockets close), said once in the log when lost and once when back; a peer
+    beside the shovel (a cab on its switch) does not hide it; nothing to connect to is
+    never a problem."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    router = Router(endpoint).start()
+    cfg = make_cfg(tmp_path, zenoh={"mode": mode, "connect": [endpoint],
+                                    **({"listen": []} if mode == "client" else {})})
+    pub = Publisher(cfg.zenoh, "s1")
+    alone = Publisher(make_cfg(tmp_path).zenoh, "s2")  # peer, listening, no connect
+    beside = None
+    caplog.set_level(logging.INFO, logger="shoveld.daemon.publisher")
+    try:
+        assert pub.start(wait_s=10.0).connected and alone.start(wait_s=10.0).connected
+        if mode == "peer":
+            beside = zenoh.open(zenoh_config("peer", (), list(cfg.zenoh.listen)))
+            assert wait_for(lambda: pub.health().get("peers") == 1, 5.0)
+        assert wait_for(lambda: pub.health().get("routers") == 1, 5.0)
+        assert _unreached(pub) == [] and pub.health()["unreached_s"] is None
+        router.stop()
+        time.sleep(Publisher.LINKS_MAX_AGE_S)  # the daemon asks once a health period
+        said = _unreached(pub)
+        assert len(said) == 1 and said[0].startswith(f"zenoh: cannot reach {endpoint} for "), said
+        time.sleep(Publisher.LINKS_MAX_AGE_S)
+        assert _unreached(pub) and pub.health()["unreached_s"] >= Publisher.LINKS_MAX_AGE_S
+        assert _unreached(alone) == [] and "unreached_s" not in alone.health()
+        router.start()  # the same endpoint: the session reconnects by itself
+        assert wait_for(lambda: not _unreached(pub), 20.0, 0.5), pub.health()
+        lines = [r.getMessage() for r in caplog.records if r.name.endswith("publisher")
+                 and endpoint in r.getMessage() and "session open" not in r.getMessage()]
+        assert len(lines) == 2, lines
+        assert lines[0].startswith(f"zenoh: cannot reach {endpoint}")
+        assert lines[1].startswith(f"zenoh: {endpoint} reached again after ")
+    finally:
+        if beside is not None:
+            beside.close()
+        pub.close()
+        alone.close()
+        router.stop()

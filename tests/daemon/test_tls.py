@@ -19,6 +19,7 @@ from typing import Any
 
 import pytest
 
+from hil_fixtures.router import start_router
 from shoveld.cli.cab import CabClient, CabState
 from shoveld.daemon.config import TlsConfig
 from shoveld.daemon.publisher import zenoh_config
@@ -34,7 +35,6 @@ from .conftest import (
     Site,
     free_port,
     make_cfg,
-    start_router,
 )
 
 FAKE = {"pass": 99, "truck": 99, "payload_kg": 999999.0, "std_kg": 1.0, "start": 0.0,
