@@ -115,8 +115,9 @@ def problems(drivers: Mapping[str, dict[str, Any]], loop: dict[str, Any],
     if not zenoh.get("open"):
         out.append(f"zenoh: session not open ({zenoh.get('last_error') or 'connecting'})")
     elif zenoh.get("unreached_s") is not None:
-        # the site's router gone (or its link): nobody off the shovel hears it, but the
-        # health message is kept (status, the log) and a peer beside it still hears it
+        # the site's router gone (or its link): nobody through it hears this, a peer
+        # beside the shovel does, and the journal has it (publisher._watch_links); the
+        # seconds count from the health message that first saw it
         out.append(f"zenoh: cannot reach {', '.join(zenoh.get('connect') or [])} for "
                    f"{zenoh['unreached_s']:.1f} s: passes are kept in the pass log")
     if persist.get("last_error"):

@@ -116,6 +116,8 @@ class Publisher:
         self.opened = threading.Event()
         self._links: tuple[float, dict[str, int]] | None = None
         """(host time, the routers and peers then) of :meth:`health`."""
+        self._links_lock = threading.Lock()
+        """The loop's health and a status query may count the links at once."""
         self._had_router = False
         self.unreached_since: float | None = None
         """Host time since when nothing is reached through ``connect`` (None: reached,
@@ -288,16 +290,17 @@ class Publisher:
         s = self._session
         if s is not None:
             now = time.monotonic()
-            if self._links is None or now - self._links[0] >= self.LINKS_MAX_AGE_S:
-                try:
-                    self._links = (now, {"routers": len(list(s.info.routers_zid())),
-                                         "peers": len(list(s.info.peers_zid()))})
-                except Exception:  # noqa: BLE001
-                    self._links = None
-                else:
-                    self._watch_links(now, **self._links[1])
-            if self._links is not None:
-                d.update(self._links[1])
+            with self._links_lock:
+                if self._links is None or now - self._links[0] >= self.LINKS_MAX_AGE_S:
+                    try:
+                        self._links = (now, {"routers": len(list(s.info.routers_zid())),
+                                             "peers": len(list(s.info.peers_zid()))})
+                    except Exception:  # noqa: BLE001
+                        self._links = None
+                    else:
+                        self._watch_links(now, **self._links[1])
+                if self._links is not None:
+                    d.update(self._links[1])
             if self.cfg.connect:
                 d["connect"] = list(self.cfg.connect)
                 since = self.unreached_since
