@@ -452,6 +452,15 @@ class CabClient:
             n += 1
         return n
 
+    def reaches(self) -> int:
+        """The routers and peers this session reaches now (a screen listens on nothing:
+        all it hears comes through what it connects to); -1 if Zenoh cannot say."""
+        try:
+            info = self.session.info
+            return len(list(info.routers_zid())) + len(list(info.peers_zid()))
+        except Exception:  # noqa: BLE001 - a closed session
+            return -1
+
     def close(self) -> None:
         for s in self._subs:
             try:

@@ -16,6 +16,7 @@ import asyncio
 import json
 import logging
 import threading
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -40,6 +41,8 @@ class ZenohSource:
     prefix: str = "shovel"
     tls: Any = None
     retry_s: float = 2.0
+    check_s: float = 1.0
+    """How often the open session is asked whether it still reaches anything."""
 
 
 def bridge(state: ScreenState, src: ZenohSource, stop: threading.Event) -> None:
@@ -61,7 +64,23 @@ def bridge(state: ScreenState, src: ZenohSource, stop: threading.Event) -> None:
         return
     state.set_link("up", where)
     try:
-        stop.wait()
+        # a router that goes away (restarted, switched off) leaves the session open and
+        # every shovel silent at once: say it is this screen's link, not the shovels
+        lost_at: float | None = None
+        while not stop.wait(src.check_s):
+            n = client.reaches()
+            if n == 0 and lost_at is None:
+                lost_at = time.monotonic()
+                log.warning("zenoh: this screen cannot reach %s", where)
+            elif n != 0 and lost_at is not None:
+                log.info("zenoh: %s reached again after %.0f s", where,
+                         time.monotonic() - lost_at)
+                lost_at = None
+                state.set_link("up", where)
+            if lost_at is not None:
+                state.set_link("down", f"this screen cannot reach {where} for "
+                               f"{time.monotonic() - lost_at:.0f} s: no shovel's messages "
+                               "can come")
     finally:
         client.close()
 

@@ -184,3 +184,41 @@ def test_a_router_that_goes_away_is_named_and_said_once_in_the_log(
         pub.close()
         alone.close()
         router.stop()
+
+
+def test_a_screen_says_its_own_link_is_down_when_its_router_goes_away(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture) -> None:
+    """Through a router that goes away every shovel falls silent at once; the screen
+    says that it is its own link ("link: down this screen cannot reach ..."), first
+    among each shovel's problems, and up again when the router is back."""
+    from shoveld.web.server import ZenohSource, bridge
+    from shoveld.web.state import ScreenState
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    router = Router(endpoint).start()
+    cfg = make_cfg(tmp_path, zenoh={"mode": "client", "listen": [], "connect": [endpoint]})
+    pub = Publisher(cfg.zenoh, "s1")
+    state = ScreenState()
+    stop = threading.Event()
+    screen = threading.Thread(target=bridge, args=(state, ZenohSource(
+        [endpoint], shovel="*", check_s=0.2), stop), daemon=True)
+    caplog.set_level(logging.INFO, logger="shoveld.web")
+    try:
+        assert pub.start(wait_s=10.0).connected
+        screen.start()
+        assert wait_for(lambda: state.link == "up" and "s1" in state.shovels, 10.0)
+        router.stop()
+        assert wait_for(lambda: state.link == "down", 5.0), state.link
+        assert state.link_detail.startswith(f"this screen cannot reach {endpoint} for ")
+        shovel = state.snapshot()["shovels"][0]
+        assert shovel["problems"][0].startswith(f"link: down this screen cannot reach {endpoint}")
+        router.start()
+        assert wait_for(lambda: state.link == "up", 20.0, 0.2), state.link_detail
+        said = [r.getMessage() for r in caplog.records if r.name == "shoveld.web"]
+        assert said == [f"zenoh: this screen cannot reach {endpoint}", said[-1]], said
+        assert said[-1].startswith(f"zenoh: {endpoint} reached again after ")
+    finally:
+        stop.set()
+        screen.join(10)
+        pub.close()
+        router.stop()

@@ -77,8 +77,12 @@ const screen = {
   problems(snap, shovel) {
     const out = [];
     if (!screen.socketUp) out.push("screen: lost the cab server, reconnecting ...");
-    if (snap && snap.link !== "up") out.push("zenoh: " + (snap.link_detail || snap.link));
-    if (shovel) for (const p of shovel.problems) if (!out.includes(p)) out.push(p);
+    const linkDown = snap && snap.link !== "up";
+    if (linkDown) out.push("zenoh: " + (snap.link_detail || snap.link));
+    // the shovel's copy of the link's words ("link: down ...") is said once, above
+    if (shovel) for (const p of shovel.problems) {
+      if (!out.includes(p) && !(linkDown && p.startsWith("link: "))) out.push(p);
+    }
     return out;
   },
   theme() {
