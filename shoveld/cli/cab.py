@@ -178,6 +178,19 @@ class CabState:
         self.closed_trucks = 0
         self.bad_messages: dict[str, int] = {}
         """Per shovel, the messages refused for a field of another kind (or not JSON)."""
+        self.link = "connecting"
+        """This screen's Zenoh link: ``connecting`` (no session yet), ``up`` or ``down``
+        (the session open, nothing reached through it: :func:`watch_link`)."""
+        self.link_detail = ""
+
+    def set_link(self, link: str, detail: str = "") -> None:
+        """The link's state; a change between up and down is a line of its own."""
+        with self.lock:
+            was = self.link
+            self.link, self.link_detail = link, detail
+            if link != was and "down" in (link, was):
+                self.lines.append(f"{time.strftime('%H:%M:%S')} zenoh: link {link}"
+                                  + (f": {detail}" if link == "down" else ""))
 
     def on_bad_message(self, shovel: str, topic: str, problem: str) -> None:
         """A message the screens cannot take: counted, and said in the log the first
@@ -288,8 +301,10 @@ class CabState:
         width = max(40, width)
         out: list[str] = []
         with self.lock:
+            if self.link == "down":
+                out.append(f"!! zenoh: {self.link_detail}")
             if not self.shovels:
-                return "waiting for a shovel on Zenoh ...\n"
+                return "\n".join([*out, "waiting for a shovel on Zenoh ...", ""])
             for name in sorted(self.shovels):
                 v = self.shovels[name]
                 out.append(f"== {name} " + ("" if v.alive else "(daemon not seen) ")
@@ -505,6 +520,27 @@ def show(state: CabState, out: TextIO, tty: bool, stop: threading.Event,
             out.flush()
 
 
+def watch_link(state: CabState, client: CabClient, where: str, stop: threading.Event,
+               check_s: float = 1.0) -> None:
+    """Ask the open session every ``check_s`` whether it still reaches anything, until
+    ``stop``. A router that goes away (restarted, switched off) leaves the session open
+    and every shovel silent at once: the screen says it is its own link, not the
+    shovels' (``state.set_link("down", ...)``), and its log says it once each way."""
+    lost_at: float | None = None
+    while not stop.wait(check_s):
+        n = client.reaches()
+        if n == 0 and lost_at is None:
+            lost_at = time.monotonic()
+            log.warning("zenoh: this screen cannot reach %s", where)
+        elif n != 0 and lost_at is not None:
+            log.info("zenoh: %s reached again after %.0f s", where, time.monotonic() - lost_at)
+            lost_at = None
+            state.set_link("up", where)
+        if lost_at is not None:
+            state.set_link("down", f"this screen cannot reach {where} for "
+                           f"{time.monotonic() - lost_at:.0f} s: no shovel's messages can come")
+
+
 def connect_waiting(state: CabState, args: argparse.Namespace, tls: TlsConfig | None,
                     retry_s: float = 2.0) -> CabClient | None:
     """Open the Zenoh session, waiting for the daemon or the router to come up: a cab
@@ -549,12 +585,19 @@ def run(args: argparse.Namespace) -> int:
     client = connect_waiting(state, args, tls)
     if client is None:
         return 0
+    state.set_link("up")
     stop = threading.Event()
+    watch = threading.Thread(target=watch_link, args=(
+        state, client, ", ".join(args.connect or ["tcp/127.0.0.1:7447"]), stop),
+        name="cab-link", daemon=True)
+    watch.start()
     try:
         show(state, sys.stdout, sys.stdout.isatty() and not args.lines, stop, args.duration,
              args.until_closed_trucks)
     except KeyboardInterrupt:
         pass
     finally:
+        stop.set()
+        watch.join(5)
         client.close()
     return 0

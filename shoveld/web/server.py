@@ -16,7 +16,6 @@ import asyncio
 import json
 import logging
 import threading
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -48,7 +47,7 @@ class ZenohSource:
 def bridge(state: ScreenState, src: ZenohSource, stop: threading.Event) -> None:
     """Open the Zenoh subscriber, retrying until it opens; says on the page what it waits
     for. Runs on its own thread until ``stop``."""
-    from shoveld.cli.cab import TOPICS, CabClient
+    from shoveld.cli.cab import TOPICS, CabClient, watch_link
 
     client = None
     where = ", ".join(src.connect)
@@ -64,23 +63,7 @@ def bridge(state: ScreenState, src: ZenohSource, stop: threading.Event) -> None:
         return
     state.set_link("up", where)
     try:
-        # a router that goes away (restarted, switched off) leaves the session open and
-        # every shovel silent at once: say it is this screen's link, not the shovels
-        lost_at: float | None = None
-        while not stop.wait(src.check_s):
-            n = client.reaches()
-            if n == 0 and lost_at is None:
-                lost_at = time.monotonic()
-                log.warning("zenoh: this screen cannot reach %s", where)
-            elif n != 0 and lost_at is not None:
-                log.info("zenoh: %s reached again after %.0f s", where,
-                         time.monotonic() - lost_at)
-                lost_at = None
-                state.set_link("up", where)
-            if lost_at is not None:
-                state.set_link("down", f"this screen cannot reach {where} for "
-                               f"{time.monotonic() - lost_at:.0f} s: no shovel's messages "
-                               "can come")
+        watch_link(state, client, where, stop, src.check_s)
     finally:
         client.close()
 

@@ -122,9 +122,6 @@ class ScreenState(CabState):
         self.shift: dict[str, dict[str, float]] = {}
         """Per shovel, passes and tonnes of the trucks closed while this screen ran (used
         when the daemon's truck messages carry no ``shift`` of their own)."""
-        self.link = "connecting"
-        """The Zenoh link: ``connecting`` (no session yet), ``up`` or ``down``."""
-        self.link_detail = ""
         self.on_change = on_change
         self.version = 0
 
@@ -179,8 +176,9 @@ class ScreenState(CabState):
         self._changed()
 
     def set_link(self, link: str, detail: str = "") -> None:
+        super().set_link(link, detail)
         with self.lock:
-            self.link, self.link_detail = link, detail
+            self.lines.clear()  # the pages draw the link from the snapshot
         self._changed()
 
     def snapshot(self, now: float | None = None) -> dict[str, Any]:

@@ -19,7 +19,7 @@ import pytest
 import zenoh
 
 from hil_fixtures.router import Router, start_router
-from shoveld.cli.cab import CabClient, CabState
+from shoveld.cli.cab import CabClient, CabState, watch_link
 from shoveld.daemon.health import problems
 from shoveld.daemon.publisher import Publisher, zenoh_config
 from shoveld.model.params import ModelParams
@@ -202,7 +202,7 @@ def test_a_screen_says_its_own_link_is_down_when_its_router_goes_away(
     stop = threading.Event()
     screen = threading.Thread(target=bridge, args=(state, ZenohSource(
         [endpoint], shovel="*", check_s=0.2), stop), daemon=True)
-    caplog.set_level(logging.INFO, logger="shoveld.web")
+    caplog.set_level(logging.INFO, logger="shoveld.cab")
     try:
         assert pub.start(wait_s=10.0).connected
         screen.start()
@@ -214,11 +214,53 @@ def test_a_screen_says_its_own_link_is_down_when_its_router_goes_away(
         assert shovel["problems"][0].startswith(f"link: down this screen cannot reach {endpoint}")
         router.start()
         assert wait_for(lambda: state.link == "up", 20.0, 0.2), state.link_detail
-        said = [r.getMessage() for r in caplog.records if r.name == "shoveld.web"]
+        said = [r.getMessage() for r in caplog.records if r.name == "shoveld.cab"
+                and r.getMessage().startswith("zenoh:")]
         assert said == [f"zenoh: this screen cannot reach {endpoint}", said[-1]], said
         assert said[-1].startswith(f"zenoh: {endpoint} reached again after ")
     finally:
         stop.set()
         screen.join(10)
+        pub.close()
+        router.stop()
+
+
+def test_the_terminal_cab_says_its_own_link_is_down_when_its_router_goes_away(
+        tmp_path: Path) -> None:
+    """The same for ``shoveld cab`` in the terminal: its screen's first line, and a line
+    of its own each way in ``--lines`` mode."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    router = Router(endpoint).start()
+    cfg = make_cfg(tmp_path, zenoh={"mode": "client", "listen": [], "connect": [endpoint]})
+    pub = Publisher(cfg.zenoh, "s1")
+    state = CabState()
+    client = None
+    stop = threading.Event()
+    watch = None
+    try:
+        assert pub.start(wait_s=10.0).connected
+        client = CabClient(state, [endpoint], "client", "s1")
+        state.set_link("up")
+        watch = threading.Thread(target=watch_link, args=(state, client, endpoint, stop, 0.2),
+                                 daemon=True)
+        watch.start()
+        assert wait_for(lambda: "s1" in state.shovels, 10.0)
+        state.take_lines()
+        router.stop()
+        assert wait_for(lambda: state.link == "down", 5.0)
+        first = state.screen(100).splitlines()[0]
+        assert first.startswith(f"!! zenoh: this screen cannot reach {endpoint} for "), first
+        router.start()
+        assert wait_for(lambda: state.link == "up", 20.0, 0.2), state.link_detail
+        said = [line.split(" ", 1)[1] for line in state.take_lines() if " zenoh: " in line]
+        assert len(said) == 2 and said[1] == "zenoh: link up", said
+        assert said[0].startswith(f"zenoh: link down: this screen cannot reach {endpoint}")
+        assert not state.screen(100).startswith("!!")
+    finally:
+        stop.set()
+        if watch is not None:
+            watch.join(5)
+        if client is not None:
+            client.close()
         pub.close()
         router.stop()
