@@ -6,6 +6,7 @@ typical range; ``bench/diagnose_matrix.py`` runs many seeds for the detection ma
 
 from __future__ import annotations
 
+import os
 import zlib
 
 import numpy as np
@@ -33,9 +34,15 @@ paired payload tests sat at their p < 0.025 threshold): it is named by
 docs/diagnosis.md): on the bench's machines its t fell a little too (5.19, 3.46, 5.03
 -> 4.47, 3.22, 4.86) while it was named on 2 of 3 (1 before)."""
 
+RUN_KNOWN_MISSES = bool(os.environ.get("SHOVELD_RUN_KNOWN_MISSES"))
+"""A known miss is not run unless this is set: not strict, its outcome fails nothing
+either way, and the boom spring's took two of the CI's 30 minutes on a slow machine
+(2026-11-30). ``bench/diagnose_matrix.py`` measures the misses over many seeds."""
+
 
 @pytest.mark.parametrize("effect", [
-    pytest.param(e, marks=pytest.mark.xfail(reason=KNOWN_MISSES[e], strict=False))
+    pytest.param(e, marks=pytest.mark.xfail(reason=KNOWN_MISSES[e], strict=False,
+                                            run=RUN_KNOWN_MISSES))
     if e in KNOWN_MISSES else e for e in sorted(SIM_EFFECTS)])
 def test_hidden_effect_is_named_first_and_cuts_the_payload_error(effect: str) -> None:
     mag, seed = draw(effect)
