@@ -39,9 +39,11 @@ def test_each_fault_in_a_pass_is_named_within_one_health_period(tmp_path: Path) 
             assert o.latency_s <= bound, (o, bound)
             assert o.numbers_while_invalid == 0, o
         elif f.device == "zenoh":
-            # a site router whose process ends is seen at once (its sockets close), and
-            # said in the next health message, which the watch beside the shovel hears
-            assert o.latency_s <= drill.health_period_s + SLACK_S, (o, bound)
+            # a site router whose process ends is seen when Zenoh's threads notice its
+            # sockets closed (at once on an idle machine), and said in the next health
+            # message, which the watch beside the shovel hears: held to the sensors'
+            # bound (bench/fault_latency.py: 0.75 s median, 0.99 s largest)
+            assert o.latency_s <= bound, (o, bound)
             assert f.says in " ".join(o.named), o
         else:
             # answers after the timeout are seen only when one lands in a later request's
