@@ -150,7 +150,7 @@ def test_the_cab_page_says_when_a_sensor_is_unplugged(run: Run) -> None:
     assert wait_for(lambda: run.text("health") != "" and not sensors_named(), 20.0), \
         run.text("health")
     run.vs.mti.unplug()
-    assert wait_for(lambda: sensors_named() == ["mti"], 5.0), run.text("health")
+    assert wait_for(lambda: "mti" in sensors_named(), 5.0), run.text("health")
     assert "bad" in (b.find_element("id", "health").get_attribute("class") or "")
     run.vs.mti.plug()
     assert wait_for(lambda: not sensors_named(), 15.0), run.text("health")
