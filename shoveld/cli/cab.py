@@ -470,9 +470,10 @@ class CabClient:
     def reaches(self) -> int:
         """The routers and peers this session reaches now (a screen listens on nothing:
         all it hears comes through what it connects to); -1 if Zenoh cannot say."""
+        from shoveld.daemon.publisher import count_links
+
         try:
-            info = self.session.info
-            return len(list(info.routers_zid())) + len(list(info.peers_zid()))
+            return sum(count_links(self.session).values())
         except Exception:  # noqa: BLE001 - a closed session
             return -1
 
@@ -526,19 +527,17 @@ def watch_link(state: CabState, client: CabClient, where: str, stop: threading.E
     ``stop``. A router that goes away (restarted, switched off) leaves the session open
     and every shovel silent at once: the screen says it is its own link, not the
     shovels' (``state.set_link("down", ...)``), and its log says it once each way."""
-    lost_at: float | None = None
+    from shoveld.daemon.publisher import Reach
+
+    reach = Reach(where, "zenoh: this screen cannot reach %s", log)
     while not stop.wait(check_s):
-        n = client.reaches()
-        if n == 0 and lost_at is None:
-            lost_at = time.monotonic()
-            log.warning("zenoh: this screen cannot reach %s", where)
-        elif n != 0 and lost_at is not None:
-            log.info("zenoh: %s reached again after %.0f s", where, time.monotonic() - lost_at)
-            lost_at = None
+        was_lost = reach.since is not None
+        lost_s = reach.update(client.reaches() != 0, time.monotonic())
+        if lost_s is not None:
+            state.set_link("down", f"this screen cannot reach {where} for {lost_s:.0f} s: "
+                           "no shovel's messages can come")
+        elif was_lost:
             state.set_link("up", where)
-        if lost_at is not None:
-            state.set_link("down", f"this screen cannot reach {where} for "
-                           f"{time.monotonic() - lost_at:.0f} s: no shovel's messages can come")
 
 
 def connect_waiting(state: CabState, args: argparse.Namespace, tls: TlsConfig | None,

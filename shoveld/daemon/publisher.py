@@ -89,6 +89,36 @@ def dumps(obj: Any) -> str:
         return _encode(_clean(obj))
 
 
+def count_links(session: Any) -> dict[str, int]:
+    """The routers and peers a Zenoh session reaches now."""
+    info = session.info
+    return {"routers": len(list(info.routers_zid())), "peers": len(list(info.peers_zid()))}
+
+
+class Reach:
+    """Whether a session reaches ``where`` (what it connects to), and since when it
+    does not: said once in ``logger`` when lost (``lost_words`` with ``where`` in it)
+    and once when reached again, not at every check. The daemon's publisher and the
+    screens each keep one."""
+
+    def __init__(self, where: str, lost_words: str, logger: logging.Logger) -> None:
+        self.where = where
+        self.lost_words = lost_words
+        self.log = logger
+        self.since: float | None = None
+        """Host time since when ``where`` is not reached (None: reached)."""
+
+    def update(self, reached: bool, now: float) -> float | None:
+        """The seconds ``where`` has not been reached (None: reached)."""
+        if not reached and self.since is None:
+            self.since = now
+            self.log.warning(self.lost_words, self.where)
+        elif reached and self.since is not None:
+            self.log.info("zenoh: %s reached again after %.1f s", self.where, now - self.since)
+            self.since = None
+        return None if self.since is None else now - self.since
+
+
 class Publisher:
     """Owns the Zenoh session of the daemon; ``put`` never blocks the caller for long."""
 
@@ -119,9 +149,10 @@ class Publisher:
         self._links_lock = threading.Lock()
         """The loop's health and a status query may count the links at once."""
         self._had_router = False
-        self.unreached_since: float | None = None
-        """Host time since when nothing is reached through ``connect`` (None: reached,
-        or nothing to connect to): see :meth:`_watch_links`."""
+        self.reach = Reach(", ".join(cfg.connect), "zenoh: cannot reach %s: nothing goes "
+                           "through it to the screens and the office; passes are kept in "
+                           "the pass log", log)
+        """Whether what ``connect`` names is reached (:meth:`_watch_links`)."""
 
     def key(self, topic: str) -> str:
         return f"{self.base}/{topic}"
@@ -293,8 +324,7 @@ class Publisher:
             with self._links_lock:
                 if self._links is None or now - self._links[0] >= self.LINKS_MAX_AGE_S:
                     try:
-                        self._links = (now, {"routers": len(list(s.info.routers_zid())),
-                                             "peers": len(list(s.info.peers_zid()))})
+                        self._links = (now, count_links(s))
                     except Exception:  # noqa: BLE001
                         self._links = None
                     else:
@@ -303,7 +333,7 @@ class Publisher:
                     d.update(self._links[1])
             if self.cfg.connect:
                 d["connect"] = list(self.cfg.connect)
-                since = self.unreached_since
+                since = self.reach.since
                 d["unreached_s"] = None if since is None else round(now - since, 1)
         return d
 
@@ -318,18 +348,8 @@ class Publisher:
         if not self.cfg.connect:
             return
         self._had_router = self._had_router or routers > 0
-        reached = routers > 0 or (self.cfg.mode != "client" and not self._had_router
-                                  and peers > 0)
-        since = self.unreached_since
-        if not reached and since is None:
-            self.unreached_since = now
-            log.warning("zenoh: cannot reach %s: nothing goes through it to the screens "
-                        "and the office; passes are kept in the pass log",
-                        ", ".join(self.cfg.connect))
-        elif reached and since is not None:
-            self.unreached_since = None
-            log.info("zenoh: %s reached again after %.1f s", ", ".join(self.cfg.connect),
-                     now - since)
+        self.reach.update(routers > 0 or (self.cfg.mode != "client" and not self._had_router
+                                          and peers > 0), now)
 
     LINKS_MAX_AGE_S = 0.5
     """How long the routers and peers counted for :meth:`health` are reused (host

@@ -21,8 +21,6 @@ CAPTURE = ROOT / "hil_fixtures" / "captures" / "daemon-e2e"
 PARAMS = CAPTURE / "params.toml"
 
 
-
-
 @pytest.fixture(scope="session")
 def params() -> ModelParams:
     return load_params(PARAMS)
