@@ -5,10 +5,11 @@ Each drill (``hil_fixtures/fault_drill.py``) runs the daemon on the virtual shov
 emulators at real time, connected to a site router, and makes each fault while a pass is
 under way: the MTi unplugged and silent, the laser unplugged, silent and babbling, a
 Modbus module powered off, silent, babbling and answering after its timeout, and the
-site's router gone (its process ended). It prints, per fault, the time
-from the fault to the arrival of the first health message naming its device (at a
-Zenoh subscriber, as a cab), in seconds and against the bound the issue sets (one health
-period after the fault can be seen: the device's ``max_age_s``), the live estimates
+site's router gone (its process ended) and hung (stopped with its sockets open). It
+prints, per fault, the time from the fault to the arrival of the first health message
+naming its device (at a Zenoh subscriber, as a cab), in seconds and against the bound
+the issue sets (one health period after the fault can be seen: the device's
+``max_age_s``; a hung router, the router's lease), the live estimates
 published as numbers while the fault's inputs were invalid (goal 0), the loop's rate and
 overruns, and the passes published against those in the pass log (goal: none lost).
 
@@ -31,6 +32,7 @@ PARAMS = ROOT / "hil_fixtures" / "captures" / "daemon-e2e" / "params.toml"
 
 def main() -> None:
     from hil_fixtures.fault_drill import cycles, run_drill, summary
+    from shoveld.security.acl import ROUTER_LEASE_S
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=3)
@@ -52,7 +54,9 @@ def main() -> None:
               + "".join(f"\n  note: {n}" for n in d.notes), flush=True)
     bound = drills[0].max_age_s + a.health_period
     print(f"per fault over {len(drills)} drills (bound: max_age_s {drills[0].max_age_s:g} s + "
-          f"one health period {a.health_period:g} s = {bound:g} s):")
+          f"one health period {a.health_period:g} s = {bound:g} s; a hung router is seen "
+          f"when its lease runs out, {ROUTER_LEASE_S:g} s, so "
+          f"{ROUTER_LEASE_S + a.health_period:g} s):")
     for line in summary(drills):
         print("  " + line)
 

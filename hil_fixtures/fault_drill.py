@@ -99,6 +99,8 @@ FAULTS: tuple[Fault, ...] = (
           _set(_adc, "delay_s", 0.0), invalidates=False, says="answering after its timeout"),
     Fault("site router gone", "zenoh", lambda r: r.router.stop(), lambda r: r.router.start(),
           invalidates=False, says="cannot reach"),
+    Fault("site router hung", "zenoh", lambda r: r.router.hang(), lambda r: r.router.resume(),
+          invalidates=False, says="cannot reach"),
 )
 PASS_PHASES = frozenset({"dig", "lift", "swing", "dump"})
 WEIGHING = frozenset(PHASES[p] for p in ESTIMATING)

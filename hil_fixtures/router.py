@@ -1,15 +1,23 @@
 """A site's Zenoh router as a process of its own, to start, stop and start again.
 
 The daemon's tests and the fault drill need a router that goes away the way a real one
-does (its process ends, its sockets close) and comes back on the same endpoint: a
-Zenoh session in router mode in a child interpreter, stopped by closing its stdin.
+does (its process ends, its sockets close; or it hangs with its sockets open) and comes
+back on the same endpoint: a Zenoh session in router mode in a child interpreter,
+stopped by closing its stdin, hung and resumed by SIGSTOP and SIGCONT. A plain one has
+the site router's lease (``shoveld pki router-config``'s), which decides when a hung
+one is seen.
 """
 
 from __future__ import annotations
 
+import json
+import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
+
+from shoveld.security.acl import lease
 
 ROUTER = """
 import json, sys, zenoh
@@ -20,6 +28,7 @@ else:
     c.insert_json5("mode", '"router"')
     c.insert_json5("listen/endpoints", json.dumps([sys.argv[1]]))
     c.insert_json5("scouting/multicast/enabled", "false")
+    c.insert_json5("transport/link/tx", sys.argv[2])
 s = zenoh.open(c)
 print("up", flush=True)
 sys.stdin.read()
@@ -30,7 +39,8 @@ s.close()
 def start_router(endpoint_or_config: str | Path) -> subprocess.Popen[str]:
     """A router process (a plain ``tcp/`` one on an endpoint, or from a config file
     ``*.json5``), once it listens; stop it with ``communicate("")``."""
-    r = subprocess.Popen([sys.executable, "-c", ROUTER, str(endpoint_or_config)],
+    r = subprocess.Popen([sys.executable, "-c", ROUTER, str(endpoint_or_config),
+                          json.dumps(lease())],
                          stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     assert r.stdout is not None
     line = r.stdout.readline().strip()
@@ -48,6 +58,7 @@ class Router:
     def __init__(self, endpoint_or_config: str | Path) -> None:
         self.where = endpoint_or_config
         self.proc: subprocess.Popen[str] | None = None
+        self.hung = False
 
     def start(self) -> Router:
         if self.proc is None:
@@ -57,7 +68,23 @@ class Router:
     def stop(self) -> None:
         proc, self.proc = self.proc, None
         if proc is not None:
+            self._cont(proc)
             proc.communicate("", timeout=10)
+
+    def hang(self) -> None:
+        """Stop answering with its sockets open (a hung router, or one cut off)."""
+        if self.proc is not None:
+            os.kill(self.proc.pid, signal.SIGSTOP)
+            self.hung = True
+
+    def resume(self) -> None:
+        if self.proc is not None:
+            self._cont(self.proc)
+
+    def _cont(self, proc: subprocess.Popen[str]) -> None:
+        if self.hung:
+            os.kill(proc.pid, signal.SIGCONT)
+            self.hung = False
 
     def __enter__(self) -> Router:
         return self.start()

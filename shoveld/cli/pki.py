@@ -2,8 +2,9 @@
 
 ``init`` makes the CA, ``issue NAME --role ROLE`` a peer's certificate and key (a
 shovel's NAME is its ``shovel.id``), ``list`` shows what was issued, and
-``router-config`` writes a router's Zenoh configuration: mutual TLS and the access
-control built from the issued certificates (``shoveld.security.acl``).
+``router-config`` writes a router's Zenoh configuration: mutual TLS, the access
+control built from the issued certificates (``shoveld.security.acl``), and the lease
+by which its peers see it gone when it hangs.
 """
 
 from __future__ import annotations
@@ -13,8 +14,11 @@ import json
 from pathlib import Path
 
 from shoveld.cli import CliError
-from shoveld.cli.options import KEY_PREFIX
+from shoveld.cli.options import KEY_PREFIX, number
 from shoveld.words import n_of
+
+LEASE_S = number(0.5, 600.0, unit="seconds",
+                 hint="below half a second a busy network's pause drops the link")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -52,6 +56,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="another router to connect to (repeatable)")
     r.add_argument("--prefix", type=KEY_PREFIX, default="shovel",
                    help="the shovels' key prefix (zenoh.prefix)")
+    r.add_argument("--lease-s", type=LEASE_S, default=None, metavar="SECONDS",
+                   help="how long the router's peers wait for its keep-alives before "
+                        "they count it gone (a hung router, a cut cable): they see it "
+                        "within this (default 2)")
     r.add_argument("-o", "--output", type=Path, default=None, help="file (default: stdout)")
     r.set_defaults(func=run_router_config)
 
@@ -94,7 +102,7 @@ def run_list(args: argparse.Namespace) -> int:
 
 
 def run_router_config(args: argparse.Namespace) -> int:
-    from shoveld.security.acl import router_config
+    from shoveld.security.acl import ROUTER_LEASE_S, router_config
     from shoveld.security.pki import CA_CERT, PkiError, list_certs
 
     listen = args.listen or ["tls/0.0.0.0:7447"]
@@ -113,8 +121,9 @@ def run_router_config(args: argparse.Namespace) -> int:
                        f"--dir {args.dir} --host ADDRESS')")
     if not (d / CA_CERT).is_file():
         raise CliError(f"{d / CA_CERT}: no site CA")
+    lease_s = ROUTER_LEASE_S if args.lease_s is None else args.lease_s
     cfg = router_config(listen, str(d / CA_CERT), str(d / f"{args.name}.crt"),
-                        str(d / f"{args.name}.key"), certs, args.prefix, args.connect)
+                        str(d / f"{args.name}.key"), certs, args.prefix, args.connect, lease_s)
     text = json.dumps(cfg, indent=2) + "\n"
     if args.output is None:
         print(text, end="")
@@ -122,5 +131,6 @@ def run_router_config(args: argparse.Namespace) -> int:
         args.output.write_text(text)
         roles = sorted({c.role or "?" for c in certs})
         print(f"{args.output}: router {args.name} on {', '.join(listen)}; "
-              f"{n_of(len(certs), 'certificate', 'certificates')} ({', '.join(roles)})")
+              f"{n_of(len(certs), 'certificate', 'certificates')} ({', '.join(roles)}); "
+              f"lease {lease_s:g} s")
     return 0

@@ -342,9 +342,9 @@ class Publisher:
         that is lost and once when it is back. A client reaches only routers; a peer
         that has had a router must keep one (the cab beside it, a peer, does not carry
         the passes to the office); a peer that never had one, any peer. A router whose
-        process ends is seen at once (its sockets close); one cut off the network only
-        when Zenoh's lease on its link runs out (``transport/link/tx/lease``, 10 s, the
-        router's own: docs/faults.md)."""
+        process ends is seen at once (its sockets close); one hung or cut off the network
+        only when the lease it declared runs out (its ``transport/link/tx/lease``: 2 s
+        in ``shoveld pki router-config``'s, Zenoh's own 10 s: docs/faults.md)."""
         if not self.cfg.connect:
             return
         self._had_router = self._had_router or routers > 0

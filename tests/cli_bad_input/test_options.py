@@ -52,6 +52,8 @@ def test_no_numeric_option_takes_any_number() -> None:
      "--alpha: '1': expected a number above 0 and below 1"),
     (["demo", "--port", "70000"], "--port: '70000': expected a whole number at least 1 and "
                                   "at most 65535"),
+    (["pki", "router-config", "r", "--dir", "d", "--lease-s", "0.1"],
+     "--lease-s: '0.1': expected a number at least 0.5 and at most 600 (seconds)"),
 ])
 def test_a_number_out_of_range_is_refused_by_name(
         argv: list[str], expected: str, capsys: pytest.CaptureFixture[str]) -> None:

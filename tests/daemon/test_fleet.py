@@ -24,6 +24,7 @@ from shoveld.daemon.health import problems
 from shoveld.daemon.publisher import Publisher, zenoh_config
 from shoveld.model.params import ModelParams
 from shoveld.replay.table import table_service
+from shoveld.security.acl import ROUTER_LEASE_S
 from shoveld.signals.table import SignalsTable
 
 from .conftest import Collector, Site, free_port, make_cfg, wait_for
@@ -185,6 +186,44 @@ def test_a_router_that_goes_away_is_named_and_said_once_in_the_log(
             beside.close()
         pub.close()
         alone.close()
+        router.stop()
+
+
+def test_a_site_router_that_hangs_is_named_when_its_lease_runs_out(
+        tmp_path: Path, site: Site) -> None:
+    """A router that stops answering with its sockets open (hung, or cut off) is seen only
+    when the lease it declared runs out: the site's, from ``shoveld pki router-config``,
+    2 s rather than Zenoh's 10 s. The shovel's health names it at its next message after
+    that, and a screen through it knows as soon; both reach it again when it answers."""
+    endpoint = f"tls/127.0.0.1:{free_port()}"
+    router = Router(site.router_config(endpoint, tmp_path / "router.json5")).start()
+    cfg = make_cfg(tmp_path, zenoh={"mode": "client", "listen": [], "connect": [endpoint],
+                                    "tls": site.tls_table("s1")})
+    pub = Publisher(cfg.zenoh, "s1")
+    client: CabClient | None = None
+    try:
+        assert pub.start(wait_s=10.0).connected
+        client = CabClient(CabState(), [endpoint], "client", "s1", tls=site.tls("cab-s1"))
+        assert wait_for(lambda: pub.health().get("routers") == 1 and client.reaches() == 1,
+                        10.0)
+        router.hang()
+        t0 = time.monotonic()
+        assert wait_for(lambda: client.reaches() == 0, 10.0)
+        screen_s = time.monotonic() - t0
+        assert wait_for(lambda: _unreached(pub) != [], 10.0)
+        health_s = time.monotonic() - t0
+        # the lease, then at most one count of the links later (LINKS_MAX_AGE_S), and the
+        # machine (0.2 s, the drill's slack); with Zenoh's own lease this took 9-10 s
+        assert screen_s <= ROUTER_LEASE_S + 0.2, screen_s
+        assert health_s <= ROUTER_LEASE_S + Publisher.LINKS_MAX_AGE_S + 0.2, health_s
+        assert _unreached(pub)[0].startswith(f"zenoh: cannot reach {endpoint} for ")
+        router.resume()
+        assert wait_for(lambda: not _unreached(pub) and client.reaches() == 1, 20.0, 0.2), \
+            pub.health()
+    finally:
+        if client is not None:
+            client.close()
+        pub.close()
         router.stop()
 
 

@@ -142,6 +142,10 @@ def test_pki_cli_one_line_errors(tmp_path: Path, capsys: pytest.CaptureFixture[s
     assert {"id": "shovel-s1", "cert_common_names": ["s1"]} in acl["subjects"]
     rule = next(r for r in acl["rules"] if r["id"] == "shovel-s1-in")
     assert rule["key_exprs"] == ["shovel/s1/**"] and "put" in rule["messages"]
+    # the lease its peers see it gone by when it hangs: the site's, or the one asked for
+    assert cfg["transport"]["link"]["tx"] == {"lease": 2000, "keep_alive": 4}
+    assert main(["pki", "router-config", "r1", "--dir", str(d), "--lease-s", "5"]) == 0
+    assert json.loads(capsys.readouterr().out)["transport"]["link"]["tx"]["lease"] == 5000
 
 
 def _config(tmp_path: Path, tls: dict[str, str], connect: str = "tls/10.20.0.2:7447",
