@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import logging
+import socket
+import struct
+import time
 
 import pytest
 from hypothesis import given
@@ -11,6 +14,7 @@ from hypothesis import strategies as st
 from drivers.base import DeviceError
 from drivers.capture.format import RegisterRead
 from drivers.modbus_adc import Channel, ChannelMap, ModbusAdcConfig, ModbusAdcDriver
+from drivers.modbus_adc.server import RegisterServer
 from hil_fixtures.fault_drill import wrong_protocol
 from hil_fixtures.modbus_adc import ModbusAdcEmulator, source_from_table
 from hil_fixtures.virtual_shovel import MOTOR_CHANNELS, DriverRunner
@@ -239,6 +243,29 @@ def test_a_module_that_answers_after_the_timeout_is_named_in_health(
         n = len(run.readings)
         assert run.wait_for(lambda: len(run.readings) > n + 3 and not run.readings[-1].invalid,
                             5)
+
+
+def test_an_answer_to_a_client_that_left_is_not_an_error_in_the_log(
+        caplog: pytest.LogCaptureFixture) -> None:
+    """A late answer whose client has gone (it timed out and reconnected): pymodbus's
+    server wrote an ERROR line with a frame dump ("Cancel send, because not connected!"),
+    seen in the fault drill's output; the module, and so the emulator, says nothing."""
+    srv = RegisterServer(lambda fc, a, c: [1] * c).start()
+    try:
+        srv.delay_s = 0.2
+        with caplog.at_level(logging.DEBUG), \
+                socket.create_connection(("127.0.0.1", srv.port)) as s:
+            s.sendall(struct.pack(">HHHBBHH", 1, 0, 6, 1, 4, 0, 2))  # read 2 input regs
+            end = time.monotonic() + 5.0
+            while srv.requests < 1 and time.monotonic() < end:
+                time.sleep(0.005)
+        with caplog.at_level(logging.DEBUG):
+            time.sleep(0.4)  # the answer is due after the client closed
+    finally:
+        srv.stop()
+    assert srv.requests == 1
+    assert not [r for r in caplog.records if r.name.startswith("pymodbus")
+                and r.levelno >= logging.WARNING], caplog.text
 
 
 def test_exception_responses_reported_per_channel() -> None:
