@@ -2,11 +2,11 @@
 health period of the moment it can be seen, live estimates are not numbers while their
 inputs are invalid, the loop keeps its rate, and no finished pass is lost (issue 12).
 
-One drill (``hil_fixtures/fault_drill.py``, about 110 s): the MTi unplugged and silent,
+One drill (``hil_fixtures/fault_drill.py``, about 140 s): the MTi unplugged and silent,
 the laser unplugged, silent and babbling, a Modbus module powered off, silent, babbling
-and answering after its timeout, and the site's Zenoh router gone and hung, each made at a moment
-drawn within a health period while a pass is under way; ``bench/fault_latency.py`` prints
-the figures of several.
+and answering after its timeout, and the site's Zenoh router gone and hung, each made at
+a moment drawn within a health period while a pass is under way;
+``bench/fault_latency.py`` prints the figures of several.
 """
 
 from __future__ import annotations
@@ -43,13 +43,14 @@ def test_each_fault_in_a_pass_is_named_within_one_health_period(tmp_path: Path) 
             # a site router whose process ends is seen when Zenoh's threads notice its
             # sockets closed (at once on an idle machine), and said in the next health
             # message, which the watch beside the shovel hears: held to the sensors'
-            # bound (bench/fault_latency.py: 0.75 s median, 0.99 s largest)
+            # bound (bench/fault_latency.py: 0.49-0.75 s median, 0.99 s largest)
             assert o.latency_s <= bound, (o, bound)
             assert f.says in " ".join(o.named), o
         elif f.name == "site router hung":
             # one that hangs with its sockets open is seen when the lease it declared
             # runs out (the site router's, from 'shoveld pki router-config': 2 s), and
-            # said in the next health message; with Zenoh's own 10 s lease, 9-10 s
+            # said in the next health message (2.41 s median, 2.99 s largest); with
+            # Zenoh's own 10 s lease, 9-10 s
             assert o.latency_s <= ROUTER_LEASE_S + drill.health_period_s + SLACK_S, o
             assert f.says in " ".join(o.named), o
         else:
