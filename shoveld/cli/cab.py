@@ -169,6 +169,10 @@ class ShovelView:
 class CabState:
     """Cab state from messages (no Zenoh here, so it is tested directly)."""
 
+    keeps_lines = True
+    """Whether events become lines for ``--lines`` (:meth:`take_lines`); the web screens,
+    which draw everything from their snapshot, keep none."""
+
     def __init__(self) -> None:
         self.shovels: dict[str, ShovelView] = {}
         self.lock = threading.Lock()
@@ -189,7 +193,7 @@ class CabState:
             was = self.link
             self.link, self.link_detail = link, detail
             if link != was and "down" in (link, was):
-                self.lines.append(f"{time.strftime('%H:%M:%S')} zenoh: link {link}"
+                self._say(f"{time.strftime('%H:%M:%S')} zenoh: link {link}"
                                   + (f": {detail}" if link == "down" else ""))
 
     def on_bad_message(self, shovel: str, topic: str, problem: str) -> None:
@@ -229,7 +233,7 @@ class CabState:
                     self._last_phase[shovel] = ph
                     w = _weight(msg)
                     val = f"{w}{_live_doubt(msg)}" if w else "no valid estimate"
-                    self.lines.append(f"{stamp} {shovel} {ph:7s} live {val}")
+                    self._say(f"{stamp} {shovel} {ph:7s} live {val}")
             elif topic == "pass":
                 if not any(p.get("pass") == msg.get("pass") for p in v.passes):
                     if v.truck and v.truck.get("truck") != msg.get("truck"):
@@ -237,7 +241,7 @@ class CabState:
                     v.passes.append(msg)
                 val = _weight(msg) or ("INVALID" + (f" ({r})" if (r := msg.get("reason"))
                                                     else ""))
-                self.lines.append(f"{stamp} {shovel} pass {msg.get('pass')} truck "
+                self._say(f"{stamp} {shovel} pass {msg.get('pass')} truck "
                                   f"{msg.get('truck')}: {val}{_doubt(msg)}")
             elif topic == "truck":
                 if msg.get("closed"):
@@ -247,14 +251,14 @@ class CabState:
                     if v.truck and v.truck.get("truck") != msg.get("truck"):
                         v.passes = [p for p in v.passes if p.get("truck") == msg.get("truck")]
                     v.truck = msg
-                self.lines.append(
+                self._say(
                     f"{time.strftime('%H:%M:%S')} {shovel} truck {msg.get('truck')}"
                     f"{' CLOSED' if msg.get('closed') else ''}: {_load(msg)} "
                     f"({msg.get('fill_pct')} %) {_truck_word(msg)}")
             elif topic == "health":
                 probs = list(msg.get("problems") or [])
                 if probs != v.problems:
-                    self.lines.append(f"{time.strftime('%H:%M:%S')} {shovel} health: "
+                    self._say(f"{time.strftime('%H:%M:%S')} {shovel} health: "
                                       + ("; ".join(probs) if probs else "all ok"))
                 v.problems = probs
 
@@ -279,15 +283,20 @@ class CabState:
             if st.get("live"):
                 v.live = st["live"]
             v.problems = list(st.get("problems") or [])
-            self.lines.append(f"{time.strftime('%H:%M:%S')} {shovel} status: truck "
+            self._say(f"{time.strftime('%H:%M:%S')} {shovel} status: truck "
                               f"{(st.get('truck') or {}).get('truck')}, "
                               f"{n_of(len(v.passes), 'pass', 'passes')} so far")
 
     def on_alive(self, shovel: str, alive: bool) -> None:
         with self.lock:
             self.view(shovel).alive = alive
-            self.lines.append(f"{time.strftime('%H:%M:%S')} {shovel} daemon "
+            self._say(f"{time.strftime('%H:%M:%S')} {shovel} daemon "
                               f"{'alive' if alive else 'LOST'}")
+
+    def _say(self, line: str) -> None:
+        """A line for ``--lines`` (the caller holds the lock)."""
+        if self.keeps_lines:
+            self.lines.append(line)
 
     def take_lines(self) -> list[str]:
         with self.lock:

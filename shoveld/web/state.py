@@ -113,6 +113,8 @@ def truck_warning(truck: dict[str, Any] | None) -> dict[str, str] | None:
 class ScreenState(CabState):
     """The cab's state, plus joints and timing, as snapshots for the web pages."""
 
+    keeps_lines = False  # the pages draw everything from the snapshot
+
     def __init__(self, on_change: Callable[[], None] | None = None) -> None:
         super().__init__()
         self.joints: dict[str, dict[str, Any]] = {}
@@ -149,7 +151,6 @@ class ScreenState(CabState):
                     s["passes"] += int(msg.get("passes") or 0)
                     s["kg"] += float(msg.get("total_kg") or 0.0)
                     s["not_weighed"] += int(msg.get("invalid_passes") or 0)
-            self.lines.clear()  # (the terminal's line log is not used here)
         self._changed()
 
     def on_bad_message(self, shovel: str, topic: str, problem: str) -> None:
@@ -164,21 +165,16 @@ class ScreenState(CabState):
             if not r:
                 r.extend(float(p["payload_kg"]) for p in st.get("truck_passes") or []
                          if p.get("valid") and p.get("payload_kg") is not None)
-            self.lines.clear()
         self._changed()
 
     def on_alive(self, shovel: str, alive: bool) -> None:
         if alive:
             self.heard[shovel] = time.monotonic()
         super().on_alive(shovel, alive)
-        with self.lock:
-            self.lines.clear()
         self._changed()
 
     def set_link(self, link: str, detail: str = "") -> None:
         super().set_link(link, detail)
-        with self.lock:
-            self.lines.clear()  # the pages draw the link from the snapshot
         self._changed()
 
     def snapshot(self, now: float | None = None) -> dict[str, Any]:
