@@ -66,9 +66,9 @@ class Router:
         return self
 
     def stop(self) -> None:
+        self.resume()  # a stopped process cannot read its stdin's end
         proc, self.proc = self.proc, None
         if proc is not None:
-            self._cont(proc)
             proc.communicate("", timeout=10)
 
     def hang(self) -> None:
@@ -78,13 +78,9 @@ class Router:
             self.hung = True
 
     def resume(self) -> None:
-        if self.proc is not None:
-            self._cont(self.proc)
-
-    def _cont(self, proc: subprocess.Popen[str]) -> None:
-        if self.hung:
-            os.kill(proc.pid, signal.SIGCONT)
-            self.hung = False
+        if self.proc is not None and self.hung:
+            os.kill(self.proc.pid, signal.SIGCONT)
+        self.hung = False
 
     def __enter__(self) -> Router:
         return self.start()
