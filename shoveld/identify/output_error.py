@@ -237,12 +237,17 @@ def fit_output(model: Model, kins: list[Kinematics], payloads: list[np.ndarray],
         ``correction``, if given), columns scaled to unit norm; and the weighted
         residual there."""
         rw, w = weighted(p, sig)
-        jw = ce.jacobian(p, m) * w[:, :, None]
-        jw = np.where(np.isfinite(jw), jw, 0.0).reshape(-1, n_p)
-        scale = np.linalg.norm(jw, axis=0)
+        # in place: the Jacobian is the fit's largest array (N x 2 x P), made every step
+        jw = ce.jacobian(p, m)
+        jw *= w[:, :, None]
+        np.copyto(jw, 0.0, where=~np.isfinite(jw))
+        # the rows in the order they lie in memory (channel by channel: a view of the
+        # Jacobian, not a copy), the residuals in the same order
+        jn = jw.transpose(1, 0, 2).reshape(-1, n_p)
+        scale = np.linalg.norm(jn, axis=0)
         scale[scale == 0] = 1.0
-        jn = jw / scale
-        g = jn.T @ rw.reshape(-1)
+        jn /= scale
+        g = jn.T @ rw.T.reshape(-1)
         if correction is not None:
             g = g - correction / scale
         return np.linalg.lstsq(jn.T @ jn, -g, rcond=None)[0] / scale, rw
@@ -351,8 +356,7 @@ def fit_output(model: Model, kins: list[Kinematics], payloads: list[np.ndarray],
                 taus.append(integrated_autocorrelation(zz))
                 lens.append(len(zz))
         noise[ch]["tau"] = float(np.average(taus, weights=lens)) if taus else 1.0
-    g_h = ce.dh0 @ p
-    g_c = ce.dc1 @ p
+    g_h, _, g_c = ce.gains(p)
     norms = np.linalg.norm(jac_rows, axis=0)
     sv = np.linalg.svd(jac_rows / np.where(norms > 0, norms, 1.0), compute_uv=False)
     return OutputFit(

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -12,6 +12,32 @@ from shoveld.model.terms import BASE_TERMS, TERMS, Term, payload_phi
 
 EQUATIONS: tuple[str, str] = ("handle", "crowd")
 """Residual channels: handle-rotation torque (N m) and crowd force (N)."""
+
+
+class CurrentDerivatives(NamedTuple):
+    """``Model.current_derivatives``: the parameters' columns that move with the measured
+    hoist current (``hoist``, an index into the parameters) and d W / d i_H there
+    (``d_hoist``, (N, 2, len)); the same for the crowd current."""
+
+    hoist: slice | np.ndarray
+    d_hoist: np.ndarray
+    crowd: slice | np.ndarray
+    d_crowd: np.ndarray
+
+
+def _index(cols: list[int]) -> slice | np.ndarray:
+    """Column indices as a slice when they are one run (a view into the parameters, not
+    a copy: the live engine takes them every block)."""
+    if cols and cols == list(range(cols[0], cols[-1] + 1)):
+        return slice(cols[0], cols[-1] + 1)
+    return np.asarray(cols, dtype=int)
+
+
+def _columns(parts: list[np.ndarray], n: int) -> np.ndarray:
+    """Terms' (N, 2, k) columns side by side (the one term's own array, uncopied)."""
+    if len(parts) == 1:
+        return parts[0]
+    return np.concatenate(parts, axis=2) if parts else np.zeros((n, 2, 0))
 
 
 class Model:
@@ -59,9 +85,11 @@ class Model:
 
     def regressor(self, k: Kinematics) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """W (N,2,P), phi (N,2) and Psi (N,2,P) with e = W p + m (phi + Psi p)."""
-        n = len(k)
-        w_all = np.empty((n, 2, len(self.param_names)))
-        psi_all = np.zeros((n, 2, len(self.param_names)))
+        n, n_p = len(k), len(self.param_names)
+        # equation-major in memory, (N, 2, P) in shape: each equation's (N, P) block is
+        # contiguous, as the output-error fits take them (shoveld.model.output)
+        w_all = np.empty((2, n, n_p)).transpose(1, 0, 2)
+        psi_all = np.zeros((2, n, n_p)).transpose(1, 0, 2)
         # each term's columns written into its slice (the live engine builds this for
         # every block of ten samples: one array, not one per term and a concatenation)
         for t, cols in zip(self.terms, self._slices, strict=True):
@@ -97,17 +125,25 @@ class Model:
             return np.zeros(0, dtype=int), np.zeros((len(k), 2, 0))
         return np.asarray(idx, dtype=int), np.concatenate(parts, axis=2)
 
-    def current_derivatives(self, k: Kinematics) -> tuple[np.ndarray, np.ndarray]:
-        """d W / d i_H and d W / d i_C, each (N, 2, P): how the residual of each equation
-        moves per ampere of measured hoist and crowd current, per unit of each parameter
-        (terms linear in a measured current; see ``Term.current_derivative``)."""
-        dh = np.zeros((len(k), 2, len(self.param_names)))
-        dc = np.zeros_like(dh)
+    def current_derivatives(self, k: Kinematics) -> CurrentDerivatives:
+        """How the residual of each equation moves per ampere of measured hoist and crowd
+        current, per unit of each parameter (terms linear in a measured current; see
+        ``Term.current_derivative``): only the few columns that do move (the drives'),
+        not (N, 2, P) arrays of zeros that every fit's Jacobian worked through."""
+        h_cols: list[int] = []
+        c_cols: list[int] = []
+        dh: list[np.ndarray] = []
+        dc: list[np.ndarray] = []
         for t, cols in zip(self.terms, self._slices, strict=True):
             d = t.current_derivative(k)
-            if d is not None:
-                dh[:, :, cols], dc[:, :, cols] = d
-        return dh, dc
+            if d is None:
+                continue
+            for got, idx, parts in zip(d, (h_cols, c_cols), (dh, dc), strict=True):
+                if got is not None:
+                    idx.extend(range(cols.start, cols.stop))
+                    parts.append(got)
+        return CurrentDerivatives(_index(h_cols), _columns(dh, len(k)),
+                                  _index(c_cols), _columns(dc, len(k)))
 
     @property
     def offset_index(self) -> tuple[int, int] | None:

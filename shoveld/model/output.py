@@ -37,18 +37,22 @@ class CurrentEquations:
     def __init__(self, model: Model, k: Kinematics) -> None:
         self.model = model
         w, phi, psi = model.regressor(k)
-        dh, dc = model.current_derivatives(k)
-        # per equation, contiguous: the fits evaluate these hundreds of times
+        d = model.current_derivatives(k)
+        # per equation, contiguous (the regressor lays them out so: no copy); the fits
+        # evaluate these hundreds of times
         self.w = w
         self.w0, self.w1 = np.ascontiguousarray(w[:, 0, :]), np.ascontiguousarray(w[:, 1, :])
         self.phi = phi
         self.psi = psi
         self.has_psi = bool(np.any(psi))
-        self.psi0 = np.ascontiguousarray(psi[:, 0, :])
-        self.psi1 = np.ascontiguousarray(psi[:, 1, :])
-        self.dh0 = np.ascontiguousarray(dh[:, 0, :])
-        self.dh1 = np.ascontiguousarray(dh[:, 1, :])
-        self.dc1 = np.ascontiguousarray(dc[:, 1, :])
+        # (views when unused: every product with them is skipped)
+        self.psi0 = np.ascontiguousarray(psi[:, 0, :]) if self.has_psi else psi[:, 0, :]
+        self.psi1 = np.ascontiguousarray(psi[:, 1, :]) if self.has_psi else psi[:, 1, :]
+        # only the columns that move with a measured current: the drives'
+        self.h_cols, self.c_cols = d.hoist, d.crowd
+        self.dh0 = np.ascontiguousarray(d.d_hoist[:, 0, :])
+        self.dh1 = np.ascontiguousarray(d.d_hoist[:, 1, :])
+        self.dc1 = np.ascontiguousarray(d.d_crowd[:, 1, :])
         self.offsets = model.offset_index
         self.i_h = k.i_h
         self.i_c = k.i_c
@@ -61,15 +65,16 @@ class CurrentEquations:
     def __len__(self) -> int:
         return int(self.w0.shape[0])
 
-    def _gains(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        # d e_handle / d i_H; the multiple of the handle equation that removes i_H from
-        # the crowd equation; d e_crowd / d i_C
+    def gains(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(N,) each: d e_handle / d i_H; the multiple of the handle equation that removes
+        i_H from the crowd equation; d e_crowd / d i_C."""
         key = p.tobytes()
         if self._gain_cache is not None and self._gain_cache[0] == key:
             return self._gain_cache[1]
-        g_h = self.dh0 @ p
-        c = -(self.dh1 @ p) / g_h
-        g_c = self.dc1 @ p
+        p_h = p[self.h_cols]
+        g_h = self.dh0 @ p_h
+        c = -(self.dh1 @ p_h) / g_h
+        g_c = self.dc1 @ p[self.c_cols]
         self._gain_cache = (key, (g_h, c, g_c))
         return g_h, c, g_c
 
@@ -80,7 +85,7 @@ class CurrentEquations:
 
     def payload_equations(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(a, b), each (N, 2) in amps: the residual of a payload m is ``a m - b``."""
-        g_h, c, g_c = self._gains(p)
+        g_h, c, g_c = self.gains(p)
         ew0, ew1 = self.w0 @ p, self.w1 @ p
         em0, em1 = self.phi[:, 0], self.phi[:, 1]
         if self.has_psi:
@@ -111,15 +116,29 @@ class CurrentEquations:
             a0, a1 = self.w0, self.w1
         e0 = a0 @ p + m * self.phi[:, 0]
         e1 = a1 @ p + m * self.phi[:, 1]
-        dh0, dh1, dc1 = self.dh0, self.dh1, self.dc1
-        g_h, c, g_c = self._gains(p)
-        jac = np.empty((len(m), 2, len(p)))
+        h, cc = self.h_cols, self.c_cols
+        g_h, c, g_c = self.gains(p)
+        gh, gc = g_h[:, None], g_c[:, None]
+        # d r / d p = (d e / d p - r d g / d p) / g per channel, the crowd channel's e
+        # being e1 + c e0; the gains move only with the drives' columns (h, cc), the
+        # other columns are the equations' own over their gains. Equation-major in
+        # memory (each channel's rows contiguous, as these operations run), (N, 2, P)
+        # in shape.
+        by_eq = np.empty((2, len(m), len(p)))
+        j0, j1 = by_eq
+        jac = by_eq.transpose(1, 0, 2)
         r_h = e0 / g_h
-        jac[:, 0, :] = (a0 - r_h[:, None] * dh0) / g_h[:, None]
-        dc_dp = -(dh1 * g_h[:, None] + (c * g_h)[:, None] * dh0) / (g_h**2)[:, None]
+        np.divide(a0, gh, out=j0)
+        j0[:, h] = (a0[:, h] - r_h[:, None] * self.dh0) / gh
+        np.multiply(c[:, None], a0, out=j1)
+        j1 += a1
+        # d c / d p (zero but for rounding while the hoist current acts through one rope
+        # on both equations, as in every model so far: kept for one where it does not)
+        dc_dp = -(self.dh1 * gh + (c * g_h)[:, None] * self.dh0) / (g_h**2)[:, None]
+        j1[:, h] += e0[:, None] * dc_dp
         n = e1 + c * e0
-        dn = a1 + c[:, None] * a0 + e0[:, None] * dc_dp
-        jac[:, 1, :] = (dn - (n / g_c)[:, None] * dc1) / g_c[:, None]
+        j1[:, cc] -= (n / g_c)[:, None] * self.dc1
+        j1 /= gc
         if self.offsets is not None:
             jac[:, 0, self.offsets[0]] -= 1.0
             jac[:, 1, self.offsets[1]] -= 1.0
@@ -131,7 +150,7 @@ class CurrentEquations:
         near standstill), taken as independent between columns."""
         if not len(self.spread_idx):
             return np.zeros((len(self), 2))
-        g_h, c, g_c = self._gains(p)
+        g_h, c, g_c = self.gains(p)
         ps = p[self.spread_idx]
         s0 = self.spread0 * ps
         s1 = self.spread1 * ps + c[:, None] * s0

@@ -90,9 +90,11 @@ class Term:
         about their values."""
         return np.zeros((len(k), 2, 0))
 
-    def current_derivative(self, k: Kinematics) -> tuple[np.ndarray, np.ndarray] | None:
+    def current_derivative(self, k: Kinematics
+                           ) -> tuple[np.ndarray | None, np.ndarray | None] | None:
         """Derivatives of the columns by the measured hoist and crowd currents, for terms
-        linear in a measured current (None: the term does not use one)."""
+        linear in a measured current (None: the term does not use one; None for one of
+        the two: its columns do not move with that current)."""
         return None
 
     def for_data(self, tables: list[Any]) -> Term:
@@ -485,10 +487,9 @@ class HoistDrive(Term):
         u_d = k.cos_a3 * i_h
         return pair(u_th[:, None] * h, u_d[:, None] * h, axis=1)
 
-    def current_derivative(self, k: Kinematics) -> tuple[np.ndarray, np.ndarray]:
-        """d(columns)/d(i_H) and d(columns)/d(i_C)."""
-        d_h = self.current_columns(k, np.ones(len(k)))
-        return d_h, np.zeros(d_h.shape)
+    def current_derivative(self, k: Kinematics) -> tuple[np.ndarray, None]:
+        """d(columns)/d(i_H); the crowd current does not move them."""
+        return self.current_columns(k, np.ones(len(k))), None
 
 
 @register_term
@@ -504,9 +505,10 @@ class CrowdDrive(Term):
     def columns(self, k: Kinematics) -> np.ndarray:
         return _stack((np.zeros(k.d.shape), -k.i_c))
 
-    def current_derivative(self, k: Kinematics) -> tuple[np.ndarray, np.ndarray]:
+    def current_derivative(self, k: Kinematics) -> tuple[None, np.ndarray]:
+        """d(columns)/d(i_C); the hoist current does not move them."""
         z = np.zeros(k.d.shape)
-        return _stack((z, z)), _stack((z, -np.ones(z.shape)))
+        return None, _stack((z, -np.ones(z.shape)))
 
 
 @register_term

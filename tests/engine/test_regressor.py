@@ -189,8 +189,74 @@ def test_the_friction_sign_is_uncertain_at_standstill_only() -> None:
     p = np.array([MD, MD * LC, KH, KC, IZZ + MD * LC**2, FV3, 3e4, FV4, fc4, 0.0, 0.0])
     ce = CurrentEquations(model, k)
     var = ce.model_variance(p)
-    g_c = ce.dc1 @ p
+    g_c = ce.gains(p)[2]
     assert var[0, 1] == pytest.approx((fc4 / g_c[0]) ** 2, rel=1e-6)
     assert var[1, 1] == pytest.approx((fc4 / g_c[1]) ** 2 / np.cosh(1.0) ** 2, rel=1e-6)
     assert var[2, 1] < 1e-5 * var[0, 1]
     assert np.all(var[:, 0] < 1e-9 * var[0, 1])  # the handle moves: its sign is known
+
+
+def _kin_with_est(k: Kinematics) -> Kinematics:
+    """``k`` with its neighbour estimates of the currents fixed (copies): a shifted
+    measured current then moves only the columns that use the sample's own reading."""
+    return dataclasses.replace(k, i_h_est=k.i_h.copy(), i_c_est=k.i_c.copy())
+
+
+def test_the_columns_move_with_the_measured_currents_only_where_the_model_says() -> None:
+    """``Model.current_derivatives`` names the few columns a measured current moves
+    (the drives'); every other column of the base model stays put when a current is
+    shifted, and the named ones move by what it says."""
+    from pathlib import Path
+
+    from shoveld.model.params import load_params
+
+    params = load_params(Path(__file__).resolve().parents[2] / "hil_fixtures" / "captures"
+                         / "daemon-e2e" / "params.toml")
+    model = params.model()
+    t = np.linspace(1, 3, 7)
+    k = _kin_with_est(dataclasses.replace(
+        kin_at(t, np.linspace(200, 900, 7), np.linspace(-80, 80, 7), np.radians(45)),
+        i_hf=np.linspace(35, 72, 7)))
+    d = model.current_derivatives(k)
+    w = model.regressor(k)[0]
+    for field, cols, got in (("i_h", d.hoist, d.d_hoist), ("i_c", d.crowd, d.d_crowd)):
+        step = 0.5
+        moved = [model.regressor(dataclasses.replace(k, **{field: getattr(k, field) + s}))[0]
+                 for s in (step, -step)]
+        dense = (moved[0] - moved[1]) / (2 * step)
+        want = np.zeros_like(w)
+        want[:, :, cols] = got
+        assert np.allclose(dense, want, rtol=1e-9, atol=1e-9 * np.abs(w).max()), field
+        assert np.any(got), field
+
+
+@pytest.mark.parametrize("effects", [[], ["payload_cog_offset", "current_saturation",
+                                          "hoist_field_weakening", "swing_centrifugal"]])
+def test_the_current_residuals_jacobian_is_their_derivative(effects: list[str]) -> None:
+    """``CurrentEquations.jacobian`` against central differences of the residual, for
+    every parameter, with a payload per sample and with the engine's one payload."""
+    from shoveld.model.output import CurrentEquations
+
+    model = Model.from_names(effects)
+    n = 9
+    t = np.linspace(1, 3, n)
+    k = _kin_with_est(dataclasses.replace(
+        kin_at(t, np.linspace(200, 900, n), np.linspace(-80, 80, n), np.radians(45)),
+        i_hf=np.linspace(60, 75, n), swing=np.full(n, 0.4), swing_rate=np.full(n, 0.2)))
+    rng = np.random.default_rng(3)
+    base = np.array([MD, MD * LC, KH, KC, IZZ + MD * LC**2, FV3, 3e4, FV4, 1.5e4, 4.0, -3.0])
+    p = np.concatenate([base, rng.normal(0.0, 50.0, len(model.param_names) - len(base))])
+    ce = CurrentEquations(model, k)
+    for m in (rng.uniform(0, 30000, n), 31000.0):
+        jac = ce.jacobian(p, m)
+        assert jac.shape == (n, 2, len(p))
+        for j in range(len(p)):
+            # a step that moves the residual by a milliampere or more (rounding), and
+            # is small beside the parameter (the gains' 1 / p curvature)
+            h = 1e-3 * max(abs(p[j]), 1.0 / (np.abs(jac[:, :, j]).max() + 1e-300))
+            dp = np.zeros(len(p))
+            dp[j] = h
+            num = (ce.residual(p + dp, m) - ce.residual(p - dp, m)) / (2 * h)
+            scale = np.abs(num).max() + np.abs(jac[:, :, j]).max() + 1e-12
+            assert np.allclose(jac[:, :, j], num, rtol=1e-5, atol=1e-5 * scale), (
+                model.param_names[j], jac[:, :, j], num)
