@@ -237,20 +237,23 @@ def fit_output(model: Model, kins: list[Kinematics], payloads: list[np.ndarray],
         ``correction``, if given), columns scaled to unit norm; and the weighted
         residual there."""
         rw, w = weighted(p, sig)
-        # in place: the Jacobian is the fit's largest array (N x 2 x P), made every step
+        # The Jacobian is the fit's largest array (N x 2 x P), made every step: weighted
+        # in place, and read twice more, by the two products (the columns' norms are the
+        # normal matrix's diagonal). Its rows in the order they lie in memory (channel by
+        # channel: a view, not a copy), the residuals in the same order.
         jw = ce.jacobian(p, m)
         jw *= w[:, :, None]
-        np.copyto(jw, 0.0, where=~np.isfinite(jw))
-        # the rows in the order they lie in memory (channel by channel: a view of the
-        # Jacobian, not a copy), the residuals in the same order
-        jn = jw.transpose(1, 0, 2).reshape(-1, n_p)
-        scale = np.linalg.norm(jn, axis=0)
-        scale[scale == 0] = 1.0
-        jn /= scale
-        g = jn.T @ rw.T.reshape(-1)
+        if not math.isfinite(float(jw.sum())):  # rows left out (w = 0) of unusable input
+            np.copyto(jw, 0.0, where=~np.isfinite(jw))
+        rows = jw.transpose(1, 0, 2).reshape(-1, n_p)
+        normal = rows.T @ rows
+        scale = np.sqrt(np.diag(normal))
+        scale = np.where(scale == 0, 1.0, scale)
+        g = (rows.T @ rw.T.reshape(-1)) / scale
         if correction is not None:
             g = g - correction / scale
-        return np.linalg.lstsq(jn.T @ jn, -g, rcond=None)[0] / scale, rw
+        normal /= np.outer(scale, scale)
+        return np.linalg.lstsq(normal, -g, rcond=None)[0] / scale, rw
 
     r0 = ce.residual(p, m)
     good0 = ok & np.isfinite(r0)

@@ -43,6 +43,7 @@ class CurrentEquations:
         self.w = w
         self.w0, self.w1 = np.ascontiguousarray(w[:, 0, :]), np.ascontiguousarray(w[:, 1, :])
         self.phi = phi
+        self.phi0, self.phi1 = np.ascontiguousarray(phi[:, 0]), np.ascontiguousarray(phi[:, 1])
         self.psi = psi
         self.has_psi = bool(np.any(psi))
         # (views when unused: every product with them is skipped)
@@ -87,7 +88,7 @@ class CurrentEquations:
         """(a, b), each (N, 2) in amps: the residual of a payload m is ``a m - b``."""
         g_h, c, g_c = self.gains(p)
         ew0, ew1 = self.w0 @ p, self.w1 @ p
-        em0, em1 = self.phi[:, 0], self.phi[:, 1]
+        em0, em1 = self.phi0, self.phi1
         if self.has_psi:
             em0, em1 = em0 + self.psi0 @ p, em1 + self.psi1 @ p
         o_h, o_c = self._offsets(p)
@@ -114,8 +115,8 @@ class CurrentEquations:
             a1 = self.w1 + m[:, None] * self.psi1
         else:
             a0, a1 = self.w0, self.w1
-        e0 = a0 @ p + m * self.phi[:, 0]
-        e1 = a1 @ p + m * self.phi[:, 1]
+        e0 = a0 @ p + m * self.phi0
+        e1 = a1 @ p + m * self.phi1
         h, cc = self.h_cols, self.c_cols
         g_h, c, g_c = self.gains(p)
         gh, gc = g_h[:, None], g_c[:, None]
