@@ -38,17 +38,13 @@ class CurrentEquations:
         self.model = model
         w, phi, psi = model.regressor(k)
         d = model.current_derivatives(k)
-        # per equation, contiguous (the regressor lays them out so: no copy); the fits
-        # evaluate these hundreds of times
-        self.w = w
+        # per equation, contiguous (the regressor lays W and Psi out so: views, not
+        # copies); the fits evaluate these hundreds of times
         self.w0, self.w1 = np.ascontiguousarray(w[:, 0, :]), np.ascontiguousarray(w[:, 1, :])
-        self.phi = phi
         self.phi0, self.phi1 = np.ascontiguousarray(phi[:, 0]), np.ascontiguousarray(phi[:, 1])
-        self.psi = psi
         self.has_psi = bool(np.any(psi))
-        # (views when unused: every product with them is skipped)
-        self.psi0 = np.ascontiguousarray(psi[:, 0, :]) if self.has_psi else psi[:, 0, :]
-        self.psi1 = np.ascontiguousarray(psi[:, 1, :]) if self.has_psi else psi[:, 1, :]
+        self.psi0 = np.ascontiguousarray(psi[:, 0, :])
+        self.psi1 = np.ascontiguousarray(psi[:, 1, :])
         # only the columns that move with a measured current: the drives'
         self.h_cols, self.c_cols = d.hoist, d.crowd
         self.dh0 = np.ascontiguousarray(d.d_hoist[:, 0, :])
