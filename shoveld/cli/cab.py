@@ -194,7 +194,7 @@ class CabState:
             self.link, self.link_detail = link, detail
             if link != was and "down" in (link, was):
                 self._say(f"{time.strftime('%H:%M:%S')} zenoh: link {link}"
-                                  + (f": {detail}" if link == "down" else ""))
+                          + (f": {detail}" if link == "down" else ""))
 
     def on_bad_message(self, shovel: str, topic: str, problem: str) -> None:
         """A message the screens cannot take: counted, and said in the log the first
@@ -242,7 +242,7 @@ class CabState:
                 val = _weight(msg) or ("INVALID" + (f" ({r})" if (r := msg.get("reason"))
                                                     else ""))
                 self._say(f"{stamp} {shovel} pass {msg.get('pass')} truck "
-                                  f"{msg.get('truck')}: {val}{_doubt(msg)}")
+                          f"{msg.get('truck')}: {val}{_doubt(msg)}")
             elif topic == "truck":
                 if msg.get("closed"):
                     v.closed.append(msg)
@@ -259,7 +259,7 @@ class CabState:
                 probs = list(msg.get("problems") or [])
                 if probs != v.problems:
                     self._say(f"{time.strftime('%H:%M:%S')} {shovel} health: "
-                                      + ("; ".join(probs) if probs else "all ok"))
+                              + ("; ".join(probs) if probs else "all ok"))
                 v.problems = probs
 
     def on_status(self, shovel: str, st: dict[str, Any]) -> None:
@@ -284,14 +284,14 @@ class CabState:
                 v.live = st["live"]
             v.problems = list(st.get("problems") or [])
             self._say(f"{time.strftime('%H:%M:%S')} {shovel} status: truck "
-                              f"{(st.get('truck') or {}).get('truck')}, "
-                              f"{n_of(len(v.passes), 'pass', 'passes')} so far")
+                      f"{(st.get('truck') or {}).get('truck')}, "
+                      f"{n_of(len(v.passes), 'pass', 'passes')} so far")
 
     def on_alive(self, shovel: str, alive: bool) -> None:
         with self.lock:
             self.view(shovel).alive = alive
             self._say(f"{time.strftime('%H:%M:%S')} {shovel} daemon "
-                              f"{'alive' if alive else 'LOST'}")
+                      f"{'alive' if alive else 'LOST'}")
 
     def _say(self, line: str) -> None:
         """A line for ``--lines`` (the caller holds the lock)."""
