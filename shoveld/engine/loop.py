@@ -363,6 +363,10 @@ class Engine:
         self.pass_start = math.nan
         self.dig_end = math.nan
         self.invalid_updates = 0
+        self.missed_ticks = 0
+        """Ticks the loop skipped in the pass's lift and swing (a busy computer), as the
+        fixed-lag rates see them: said with a pass left with too few valid samples, as
+        their likely cause."""
         self.target_changed_t: float | None = None
         """When the crowd's laser changed target (:data:`CROWD_TARGET_CHANGED`) in the
         pass in progress, from its dig's start (set and read only while there is one;
@@ -449,6 +453,8 @@ class Engine:
                 valid = self._update(s, th, d, sw, thd, dd, swd, thdd, ddd, swdd, use)
         else:
             if t - lag.last_t > lag.late:  # ticks the loop skipped: holes in the window
+                if estimating:
+                    self.missed_ticks += round((t - lag.last_t) / lag.dt) - 1
                 for _ in range(lag.gap(t)):
                     valid = self._lagged(lag.push_hole(), ph) or valid
             tag = lag.push_known(t, (z_th, z_d, 0.0 if z_sw != z_sw else z_sw),
@@ -570,6 +576,7 @@ class Engine:
             self._cached = (-1, math.nan, math.nan)
             self.batch.clear()
             self.invalid_updates = 0
+            self.missed_ticks = 0
             self.target_changed_t = None
             self._crowd_lo, self._crowd_hi = math.inf, -math.inf
         elif prev == DIG:
@@ -654,6 +661,11 @@ class Engine:
         elif rls.n < self.cfg.min_samples:
             reason = (f"only {n_of(rls.n, 'valid sample', 'valid samples')} in lift and "
                       f"swing ({self.invalid_updates} invalid)")
+            if self.missed_ticks:
+                # the joints' rates need most of a window's ticks: a loop that skips many
+                # leaves them no fit, whatever the sensors did (health says "overruns")
+                reason += (f"; the loop missed {n_of(self.missed_ticks, 'tick', 'ticks')} "
+                           "in them: is the computer overloaded?")
         elif still:
             reason = (f"the crowd moved {travel:.2f} m in the pass: the laser sees something "
                       "other than the handle, or is stuck")
