@@ -364,9 +364,9 @@ class Engine:
         self.dig_end = math.nan
         self.invalid_updates = 0
         self.missed_ticks = 0
-        """Ticks the loop skipped in the pass's lift and swing (a busy computer), as the
-        fixed-lag rates see them: said with a pass left with too few valid samples, as
-        their likely cause."""
+        """Ticks missing from the pass's lift and swing (a loop too busy to keep its rate,
+        or rows missing from a table), as the fixed-lag rates see them: said with a pass
+        left with too few valid samples, as their likely cause."""
         self.target_changed_t: float | None = None
         """When the crowd's laser changed target (:data:`CROWD_TARGET_CHANGED`) in the
         pass in progress, from its dig's start (set and read only while there is one;
@@ -663,9 +663,10 @@ class Engine:
                       f"swing ({self.invalid_updates} invalid)")
             if self.missed_ticks:
                 # the joints' rates need most of a window's ticks: a loop that skips many
-                # leaves them no fit, whatever the sensors did (health says "overruns")
-                reason += (f"; the loop missed {n_of(self.missed_ticks, 'tick', 'ticks')} "
-                           "in them: is the computer overloaded?")
+                # leaves them no fit, whatever the sensors did (health says "overruns");
+                # offline, rows missing from the table do the same
+                reason += (f"; {n_of(self.missed_ticks, 'tick', 'ticks')} missing from "
+                           "them (a loop too busy to keep its rate?)")
         elif still:
             reason = (f"the crowd moved {travel:.2f} m in the pass: the laser sees something "
                       "other than the handle, or is stuck")
