@@ -138,6 +138,7 @@ def test_the_cab_page_shows_the_truck_and_what_is_left(run: Run) -> None:
         return (run.text("truck-no") == str(m["truck"])
                 and run.text("truck-total") == load(m)
                 and run.text("remaining") == remaining(m))
+
     def why(m: dict[str, Any]) -> tuple[Any, ...]:
         """What the page shows against the message, and why each pass was not weighed."""
         return (m, run.text("truck-no"), run.text("truck-total"), run.text("remaining"),
