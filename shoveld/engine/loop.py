@@ -664,8 +664,9 @@ class Engine:
             if self.missed_ticks:
                 # the joints' rates need most of a window's ticks: a loop that skips many
                 # leaves them no fit, whatever the sensors did (health says "overruns");
-                # offline, rows missing from the table do the same
-                reason += (f"; {n_of(self.missed_ticks, 'tick', 'ticks')} missing from "
+                # offline, rows missing from the table do the same. After ": ", as the
+                # cab shows a reason's head and the rest where it is touched
+                reason += (f": {n_of(self.missed_ticks, 'tick', 'ticks')} missing from "
                            "them (a loop too busy to keep its rate?)")
         elif still:
             reason = (f"the crowd moved {travel:.2f} m in the pass: the laser sees something "
