@@ -454,7 +454,7 @@ class Engine:
         else:
             if t - lag.last_t > lag.late:  # ticks the loop skipped: holes in the window
                 if estimating:
-                    self.missed_ticks += round((t - lag.last_t) / lag.dt) - 1
+                    self.missed_ticks += lag.missed(t)
                 for _ in range(lag.gap(t)):
                     valid = self._lagged(lag.push_hole(), ph) or valid
             tag = lag.push_known(t, (z_th, z_d, 0.0 if z_sw != z_sw else z_sw),

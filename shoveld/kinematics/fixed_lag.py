@@ -89,14 +89,17 @@ class FixedLagSavgol(Generic[T]):
             return None
         return tag_c, self.derivatives()
 
+    def missed(self, t: float) -> int:
+        """How many ticks were missed between the last sample and ``t`` (0 when none
+        was pushed since a restart), bridged or not."""
+        last = self.last_t
+        return 0 if last != last else round((t - last) / self.dt) - 1
+
     def gap(self, t: float) -> int:
         """How many ticks were missed between the last sample and ``t`` that the filter
         will bridge: push that many holes (:meth:`push_hole`) before the sample at ``t``.
         0 when none were missed, or when the gap is too long (the push then restarts)."""
-        last = self.last_t
-        if last != last:
-            return 0
-        n = round((t - last) / self.dt) - 1
+        n = self.missed(t)
         return n if 0 < n and self._run + n <= self.max_gap else 0
 
     def push_hole(self, tag: T | None = None) -> T | None:
