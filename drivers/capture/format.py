@@ -240,6 +240,21 @@ def _time(path: Path, lineno: int, obj: dict[str, Any], prev: float) -> float:
     return float(t)
 
 
+def _records(path: Path, expected: str) -> Iterator[tuple[int, dict[str, Any], float]]:
+    """The line-by-line path's walk of a JSON-lines recording: each record after the
+    ``expected`` header with its line number and its time (never before the last one's),
+    up to a torn last line."""
+    it = _lines(path)
+    _header(path, it, expected)
+    prev = -math.inf
+    for lineno, text in it:
+        obj = _record(path, lineno, text)
+        if obj is None:
+            return
+        prev = _time(path, lineno, obj, prev)
+        yield lineno, obj, prev
+
+
 # The recorder's own line shapes, matched over a whole file at once: many times faster
 # than a JSON parse per line. Only a file whose every record has one of these shapes
 # and passes the same checks is read this way; anything else (another spelling, an
@@ -459,14 +474,7 @@ def read_serial_chunks(path: str | os.PathLike[str], whole_file: bool = True
     if fast is not None:
         yield from fast
         return
-    it = _lines(p)
-    _header(p, it, SERIAL_FORMAT)
-    prev = -math.inf
-    for lineno, text in it:
-        obj = _record(p, lineno, text)
-        if obj is None:
-            return
-        prev = _time(p, lineno, obj, prev)
+    for lineno, obj, t in _records(p, SERIAL_FORMAT):
         d = obj.get("d")
         if d not in ("rx", "tx"):
             raise CaptureFormatError(p, lineno, f"'d' must be \"rx\" or \"tx\", got {d!r}")
@@ -478,7 +486,7 @@ def read_serial_chunks(path: str | os.PathLike[str], whole_file: bool = True
         except ValueError:
             raise CaptureFormatError(p, lineno, "'hex' is not an even-length string of hex "
                                      f"digits: {hx[:40]!r}") from None
-        yield SerialChunk(prev, d, data)
+        yield SerialChunk(t, d, data)
 
 
 def _int(path: Path, lineno: int, obj: dict[str, Any], key: str, lo: int, hi: int) -> int:
@@ -498,14 +506,7 @@ def read_modbus_reads(path: str | os.PathLike[str], whole_file: bool = True
     if fast is not None:
         yield from fast
         return
-    it = _lines(p)
-    _header(p, it, MODBUS_FORMAT)
-    prev = -math.inf
-    for lineno, text in it:
-        obj = _record(p, lineno, text)
-        if obj is None:
-            return
-        prev = _time(p, lineno, obj, prev)
+    for lineno, obj, t in _records(p, MODBUS_FORMAT):
         unit = _int(p, lineno, obj, "unit", 0, 255)
         fc = _int(p, lineno, obj, "fc", 3, 4)
         addr = _int(p, lineno, obj, "addr", 0, 65535)
@@ -517,12 +518,12 @@ def read_modbus_reads(path: str | os.PathLike[str], whole_file: bool = True
                     for r in regs):
                 raise CaptureFormatError(p, lineno, f"'regs' must be a list of {count} integers "
                                          "in [0, 65535] (raw 16-bit register words)")
-            yield RegisterRead(prev, unit, fc, addr, count, registers=tuple(regs))
+            yield RegisterRead(t, unit, fc, addr, count, registers=tuple(regs))
         elif obj.get("error") == "timeout":
-            yield RegisterRead(prev, unit, fc, addr, count, error="timeout")
+            yield RegisterRead(t, unit, fc, addr, count, error="timeout")
         elif obj.get("error") == "exception":
             code = _int(p, lineno, obj, "code", 1, 255)
-            yield RegisterRead(prev, unit, fc, addr, count, error="exception",
+            yield RegisterRead(t, unit, fc, addr, count, error="exception",
                                exception_code=code)
         else:
             raise CaptureFormatError(p, lineno, "a record needs 'regs', or 'error': \"timeout\", "
