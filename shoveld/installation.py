@@ -11,6 +11,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, TypeVar
+
+if TYPE_CHECKING:
+    import numpy as np
+
+Value = TypeVar("Value", float, "np.ndarray")
+"""A reading or a column of them: the conversions are elementwise (bulk replay)."""
 
 CROWD_SPEED_MAX_MPS = 3.0
 """The fastest the handle moves along the laser's beam: above the 2 m/s the field trial
@@ -37,26 +44,26 @@ class Installation:
     6 .. 10.79 m crowd stroke, model-notes)."""
     crowd_gain: float = 1.0
 
-    def handle_deg(self, mti_pitch_deg: float) -> float:
+    def handle_deg(self, mti_pitch_deg: Value) -> Value:
         return self.handle_pitch_sign * mti_pitch_deg + self.handle_pitch_offset_deg
 
-    def mti_pitch_deg(self, handle_deg: float) -> float:
+    def mti_pitch_deg(self, handle_deg: Value) -> Value:
         return (handle_deg - self.handle_pitch_offset_deg) / self.handle_pitch_sign
 
-    def swing_deg(self, mti_yaw_deg: float) -> float:
+    def swing_deg(self, mti_yaw_deg: Value) -> Value:
         return self.swing_yaw_sign * wrap_deg(mti_yaw_deg - self.swing_yaw_zero_deg)
 
-    def mti_yaw_deg(self, swing_deg: float) -> float:
+    def mti_yaw_deg(self, swing_deg: Value) -> Value:
         return wrap_deg(swing_deg / self.swing_yaw_sign + self.swing_yaw_zero_deg)
 
-    def crowd_m(self, laser_m: float) -> float:
+    def crowd_m(self, laser_m: Value) -> Value:
         return self.crowd_offset_m + self.crowd_gain * laser_m
 
-    def laser_m(self, crowd_m: float) -> float:
+    def laser_m(self, crowd_m: Value) -> Value:
         return (crowd_m - self.crowd_offset_m) / self.crowd_gain
 
 
-def wrap_deg(a: float) -> float:
+def wrap_deg(a: Value) -> Value:
     """Angle into [-180, 180)."""
     return (a + 180.0) % 360.0 - 180.0
 

@@ -41,9 +41,9 @@ class PhaseConfig:
     min_dig_s: float = 2.0
 
     RANGES: ClassVar[dict[str, dict[str, float | bool]]] = {
-        k: {"positive": True} for k in (
+        **{k: {"positive": True} for k in (
             "rise_deg_s", "swing_on_deg_s", "swing_off_deg_s", "idle_rate_deg_s",
-            "idle_swing_deg_s", "idle_crowd_m_s", "idle_hold_s")} | {
+            "idle_swing_deg_s", "idle_crowd_m_s", "idle_hold_s")},
         "stop_hold_s": {"lo": 0.0}, "min_dig_s": {"lo": 0.0},
         "tuck_deg": {"lo": -90.0, "hi": 90.0}, "dig_exit_deg": {"lo": -90.0, "hi": 90.0}}
     """What the configuration may set each threshold to (``shoveld.daemon.config``):

@@ -75,6 +75,7 @@ def residuals(dataset: DataSet, ev: Evaluation, valid_ref: list[np.ndarray]) -> 
         out["crowd_n"].append(e[:, 1])
         out["pass"].append(np.full(len(idx), p.index))
         t = k.t
+        assert k.i_h_est is not None  # Kinematics.__post_init__ sets it
         di = np.gradient(k.i_h_est, t) if len(t) > 2 else np.zeros(len(t))
         v = {
             "hoist_field_a": k.i_hf, "swing_rate": np.degrees(np.abs(k.swing_rate)),

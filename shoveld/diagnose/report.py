@@ -245,8 +245,9 @@ def _plot_payload(d: Diagnosis, path: Path) -> None:
     ax.axhline(0, color="k", lw=0.8, label="truck scale")
     ax.set_xlabel("pass")
     ax.set_ylabel("estimate - scale (kg)")
-    sec = ax.secondary_yaxis("right", functions=(lambda y: 100 * y / RATED_PAYLOAD_KG,
-                                                 lambda p: p * RATED_PAYLOAD_KG / 100))
+    sec = ax.secondary_yaxis("right", functions=(
+        lambda y: 100 * np.asarray(y) / RATED_PAYLOAD_KG,
+        lambda p: np.asarray(p) * RATED_PAYLOAD_KG / 100))
     sec.set_ylabel("% of rated load")
     ax.legend(fontsize=8, ncol=2)
     ax.set_title("Payload per verified pass against the scale")

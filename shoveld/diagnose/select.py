@@ -45,6 +45,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -52,6 +53,7 @@ from scipy import stats
 
 from shoveld.diagnose.data import DataSet, Pass
 from shoveld.diagnose.fit import Evaluation, evaluate
+from shoveld.model.effects import ExtensionTerm
 from shoveld.model.terms import TERMS
 from shoveld.words import n_of
 
@@ -419,6 +421,7 @@ def _late_clear(cand: Evaluation, name: str, z: float) -> bool:
     fitted = cand.final or cand.folds[0]
     for t in fitted.model().terms:
         if t.name == name:
+            assert isinstance(t, ExtensionTerm)  # ``aligns_streams`` is an ExtensionTerm's
             return any(f["std"] > 0.0 and f["value"] >= z * f["std"]
                        for f in t.findings(fitted.names, fitted.values, fitted.cov))
     return False
@@ -573,7 +576,7 @@ def _pair(dataset: DataSet, cur: Evaluation, scores: list[CandidateScore],
         s = compare(dataset, _reference(cfg, both, cur, lambda: fit([], True)), both,
                     "+".join(names), n_tried, cfg)
         for one, other in ((a.name, b.name), (b.name, a.name)):
-            alone = _reference(cfg, both, fit([other]), lambda o=other: fit([o], True))
+            alone = _reference(cfg, both, fit([other]), partial(fit, [other], True))
             inc = compare(dataset, alone, both, one, n_tried, cfg)
             adds = (inc.t > inc.t_crit and inc.gain >= cfg.min_gain) or (
                 inc.significant and inc.witness != "residual")
@@ -724,7 +727,7 @@ def _backward(dataset: DataSet, current: list[str], cfg: SelectionConfig,
         if (done := forward.get((frozenset(rest), c))) is not None:
             verdicts.append(done)
             continue
-        ref = _reference(cfg, full, ev(rest), lambda r=rest: ev(r, folds=True))
+        ref = _reference(cfg, full, ev(rest), partial(ev, rest, folds=True))
         verdicts.append(compare(dataset, ref, full, c, len(current), cfg, before[c]))
     out = [v for v in verdicts if not v.significant]
     removed = min(out, key=lambda v: v.t if math.isfinite(v.t) else -math.inf) if out else None

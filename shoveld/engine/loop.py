@@ -721,8 +721,9 @@ class Engine:
                                                   or self.rls_empty is not None):
             # the fit only where it is used; as Python floats, which the checks and the
             # batch's array take faster than numpy scalars (the same values)
-            q, v, a = self.lagged.derivatives().tolist()
-            return self._update(s_lag, *q, *v, *a, use)
+            (th, d, sw), (thd, dd, swd), (thdd, ddd, swdd) = (
+                self.lagged.derivatives().tolist())
+            return self._update(s_lag, th, d, sw, thd, dd, swd, thdd, ddd, swdd, use)
         return False
 
     def _update(self, s: Sample, th: float, d: float, sw: float, thd: float, dd: float,

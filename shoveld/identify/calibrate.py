@@ -352,7 +352,7 @@ class Calibrator:
                                "window_s": self.window_s, "polyorder": self.polyorder,
                                "payload_window_s": self.payload_window_s,
                                "payload_polyorder": self.payload_polyorder}
-        current_noise: dict[str, list[float]] = {}
+        current_noise: dict[str, dict[str, float]] = {}
         if method == "output":
             files = [f for f in self.files_ if f.use.any()]
             of = fit_output(self.model, [f.kin.take(f.use) for f in files],

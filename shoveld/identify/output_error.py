@@ -190,7 +190,7 @@ def input_noise_correction(model: Model, k: Kinematics, ce: CurrentEquations, p:
         for e in (e for e in errors if e.stride == stride):
             h = e.step
             moved = [CurrentEquations(model, replace(k_s, **{
-                f: getattr(k_s, f) + sign * h * (a if np.ndim(a) == 0 else a[::stride])
+                f: getattr(k_s, f) + sign * h * (a[::stride] if isinstance(a, np.ndarray) else a)
                 for f, a in e.shift.items()})) for sign in (1.0, -1.0)]
             rp, rm = (c.residual(p, m_s) for c in moved)
             r1 = (rp - rm) / (2 * h)

@@ -144,8 +144,8 @@ class JointFilter:
             if abs(p00 - self._prev_p) < 1e-9 * p00:
                 # Converged: the gain is constant from here on (steady-state Kalman filter),
                 # so the update needs no matrix algebra until a gap disturbs it.
-                k = self.kf.K
-                self._steady = (float(k[0]), float(k[1]), float(k[2]))
+                gain = self.kf.K
+                self._steady = (float(gain[0]), float(gain[1]), float(gain[2]))
                 x = self.kf.x
                 self._qva = [float(x[0]), float(x[1]), float(x[2])]
             self._prev_p = p00

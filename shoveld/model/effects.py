@@ -91,7 +91,7 @@ class ExtensionTerm(Term):
     a value outside it says the term stands in for another cause."""
     search: ClassVar[dict[str, tuple[float, float]]] = {}
     """Hyper-parameters found by a 1-D search on training data, with their bounds."""
-    defaults: ClassVar[dict[str, float]] = {}
+    defaults: ClassVar[dict[str, float | str]] = {}
     cause: ClassVar[str] = ""
     """The physical cause in the words of a field engineer (the report's headline)."""
     signature: ClassVar[str] = ""
@@ -231,6 +231,7 @@ class HoistFieldWeakening(ExtensionTerm):
     def columns(self, k: Kinematics) -> np.ndarray:
         x = k.i_hf / self.h("field_nominal_a") - 1.0
         u_th, u_d = _unit_hoist(k)
+        assert k.i_h_est is not None  # Kinematics.__post_init__ sets it
         q = k.i_h_est * x
         return _stack((q * u_th, q * u_d))
 
@@ -855,6 +856,8 @@ class CurrentSaturation(ExtensionTerm):
     def columns(self, k: Kinematics) -> np.ndarray:
         u_th, u_d = _unit_hoist(k)
         w = self.KNEE_ROUND_A
+        # Kinematics.__post_init__ sets both
+        assert k.i_h_est is not None and k.i_c_est is not None
         i = k.i_h_est
         above = np.sign(i) * w * np.logaddexp(0.0, (np.abs(i) - self.h("knee_a")) / w)
         ic3 = k.i_c_est**3 / self.h("crowd_ref_a") ** 2
@@ -942,6 +945,7 @@ class RopePull:
         (``pull_offset_a``), times the pull per ampere at each row's field relative to
         the nominal field's (``pull_ratios`` on the hoist drive's curve). Without them,
         the current as measured at the nominal field's pull."""
+        assert k.i_h_est is not None  # Kinematics.__post_init__ sets it
         i = k.i_h_est - float(self.hyper.get("pull_offset_a", 0.0))
         ratios = self.hyper.get("pull_ratios")
         if not ratios:

@@ -193,7 +193,7 @@ def load_params(path: str | Path) -> ModelParams:
     cov_d = doc.get("covariance", {})
     if not isinstance(cov_d, dict):
         raise ParamsFileError(f"{spath}: key 'covariance' must be a table")
-    n = len(values)
+    n_params = len(values)
     cov = np.diag(np.square(np.nan_to_num(stderr)))
     if cov_d:
         if cov_d.get("names") != model.param_names:
@@ -203,9 +203,9 @@ def load_params(path: str | Path) -> ModelParams:
             c = np.asarray(cov_d.get("matrix"), dtype=float)
         except (TypeError, ValueError):
             c = np.zeros(0)
-        if c.shape != (n, n) or not np.all(np.isfinite(c)):
-            raise ParamsFileError(f"{spath}: key 'covariance.matrix' must be a {n} x {n} table "
-                                  "of finite numbers")
+        if c.shape != (n_params, n_params) or not np.all(np.isfinite(c)):
+            raise ParamsFileError(f"{spath}: key 'covariance.matrix' must be a {n_params} x "
+                                  f"{n_params} table of finite numbers")
         cov = c
     from shoveld.model.output import CHANNELS, NOISE_KEYS
 

@@ -57,8 +57,9 @@ class Term:
     """One physical contribution to the equations of motion."""
 
     name: ClassVar[str]
-    params: ClassVar[tuple[str, ...]]
-    units: ClassVar[tuple[str, ...]]
+    params: tuple[str, ...]
+    """The term's parameters: a class's own, or an instance's (the hoist drive's knots)."""
+    units: tuple[str, ...]
     description: ClassVar[str] = ""
     """What the term means, in words a field engineer uses."""
     base: ClassVar[bool] = False
@@ -381,8 +382,8 @@ class HoistDrive(Term):
     """
 
     name = "hoist_drive"
-    params = ("K_H",)
-    units = ("N per A",)
+    params: tuple[str, ...] = ("K_H",)  # and a parameter per knot (``__init__``)
+    units: tuple[str, ...] = ("N per A",)
     description = "hoist motors' pull on the rope per ampere, over the hoist field current"
     base = True
 

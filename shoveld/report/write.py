@@ -71,10 +71,12 @@ def _plots(f: ShiftFigures) -> dict[str, bytes]:
     if f.empties:
         fig, ax = plt.subplots(figsize=(8, 3.6))
         when = [dt.datetime.fromtimestamp(e["end"]).astimezone() for e in f.empties]
-        ax.errorbar(when, [e["payload_kg"] for e in f.empties],
+        ax.errorbar(when,  # type: ignore[arg-type]  # datetimes: matplotlib's stubs lack them
+                    [e["payload_kg"] for e in f.empties],
                     yerr=[e["std_kg"] for e in f.empties], fmt="o", markersize=3,
                     color="#2b6cb0", ecolor="#9bb8d8", label="each return")
-        ax.plot(when, [e["median_kg"] for e in f.empties], color="black",
+        ax.plot(when,  # type: ignore[arg-type]  # datetimes: matplotlib's stubs lack them
+                [e["median_kg"] for e in f.empties], color="black",
                 label="median of the last returns")
         warn = max(e["warn_kg"] for e in f.empties)
         for y in (warn, -warn):

@@ -9,6 +9,7 @@ written independently (see ``docs/diagnosis.md``).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any, ClassVar
 
 import numpy as np
@@ -239,8 +240,9 @@ class SensorTimeSkewEffect(SimEffect):
         tau = self.magnitude / 1000.0
         t = cols["time_s"]
         if tau >= 0:
-            late_ones = [("handle_deg", m.th, np.degrees), ("crowd_m", m.d, lambda x: x),
-                         ("swing_deg", m.swing, np.degrees)]
+            late_ones: list[tuple[str, np.ndarray, Callable[[np.ndarray], np.ndarray]]] = [
+                ("handle_deg", m.th, np.degrees), ("crowd_m", m.d, lambda x: x),
+                ("swing_deg", m.swing, np.degrees)]
             if self.form == "mti":
                 late_ones = [late_ones[0], late_ones[2]]
             for name, truth, conv in late_ones:

@@ -12,7 +12,7 @@ later tries to explain it.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -75,10 +75,11 @@ class Motion:
     boom: np.ndarray
     payload: np.ndarray
     """Mass in the dipper, kg."""
-    bank_force: np.ndarray = field(default=None)  # type: ignore[assignment]
-    """(N, 2) resisting generalized force of the bank while digging (N m, N)."""
-    phase: np.ndarray = field(default=None)  # type: ignore[assignment]
-    """Truth label per fine sample (index into ``PHASES``)."""
+    bank_force: np.ndarray | None = None
+    """(N, 2) resisting generalized force of the bank while digging (N m, N); None:
+    zeros (``__post_init__`` sets them)."""
+    phase: np.ndarray | None = None
+    """Truth label per fine sample (index into ``PHASES``); None: zeros, as above."""
 
     def __post_init__(self) -> None:
         n = len(self.t)
@@ -211,6 +212,7 @@ class Plant:
                          pp.fv4 * dd + pp.fc4 * np.tanh(dd / s)], axis=-1)
         for e in self.effects:
             fric = e.friction(ctx, fric)
+        assert motion.bank_force is not None  # Motion.__post_init__ sets it
         need = q + fric + motion.bank_force
         tau_u, along_u = rope_force_geometry(th, d, boom, pp.l_bs)
         rope = need[:, 0] / tau_u
