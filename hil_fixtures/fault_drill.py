@@ -59,8 +59,8 @@ class Fault:
     device: str
     """The device whose entry in health's problems names it (``"mti: ..."``; the site
     network's, ``"zenoh: ..."``)."""
-    make: Callable[[Rig], None]
-    clear: Callable[[Rig], None]
+    make: Callable[[Rig], object]  # (what make and clear return is not used)
+    clear: Callable[[Rig], object]
     invalidates: bool = True
     """While it lasts, the device's inputs are invalid (a module answering late still
     gives most of its readings)."""
@@ -260,7 +260,10 @@ def run_drill(table: SignalsTable, params_path: Path, state_dir: Path,
                 # a fault that makes inputs invalid comes while the pass is weighed, so
                 # that the live estimates it could spoil are there to be checked
                 phases = WEIGHING if fault.invalidates else PASS_PHASES
-                if not wait_until(lambda ph=phases: phase() in ph, 60.0, 0.01):
+                def in_phases(ph: frozenset[str] = phases) -> bool:
+                    return phase() in ph
+
+                if not wait_until(in_phases, 60.0, 0.01):
                     notes.append(f"{fault.name}: not in {sorted(phases)} within 60 s; made "
                                  "anyway")
                 ph = phase()

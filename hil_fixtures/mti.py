@@ -41,7 +41,7 @@ import tempfile
 import termios
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
@@ -393,7 +393,7 @@ class MtiEmulator:
                 if len(msg.data) % 4:
                     self._send(MID.ERROR, b"\x21")
                     return
-                self._set_outputs([tuple(s) for s in decode_output_configuration(msg.data)])
+                self._set_outputs(decode_output_configuration(msg.data))
             self._send(MID.OUTPUT_CONFIGURATION, encode_output_configuration(self.outputs))
         elif mid == MID.GOTO_MEASUREMENT:
             # in measurement before the ack goes out (the emulator's thread sends both, so
@@ -403,7 +403,7 @@ class MtiEmulator:
         else:
             self._send(MID.ERROR, b"\x04")
 
-    def _set_outputs(self, wanted: list[tuple[int, int]]) -> None:
+    def _set_outputs(self, wanted: Iterable[tuple[int, int]]) -> None:
         out = []
         for xdi, f in wanted:
             if xdi & TYPE_MASK not in SUPPORTED or f == 0:

@@ -366,6 +366,7 @@ class ModbusAdcDriver(Driver):
 
         from drivers.modbus_adc.strict import strict_registers
 
+        client: ModbusTcpClient | ModbusSerialClient
         if c.transport == "tcp":
             client = ModbusTcpClient(c.host, port=int(c.port), timeout=c.timeout_s,
                                      retries=c.retries)

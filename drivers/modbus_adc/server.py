@@ -38,7 +38,7 @@ class _ClientLeft(logging.Filter):
     threads (``modbus-*``) are quieted."""
 
     def filter(self, record: logging.LogRecord) -> bool:
-        return not (record.threadName.startswith("modbus-")
+        return not (record.threadName is not None and record.threadName.startswith("modbus-")
                     and str(record.getMessage()).startswith("Cancel send"))
 
 

@@ -421,8 +421,9 @@ class MtiSerialDriver(Driver):
             if not self._consistent(pc, stf, e, g, acc, q, sw):
                 return None
             self._count_gap(pc)
-            values = {"roll_deg": e[0], "pitch_deg": e[1], "yaw_deg": e[2],
-                      "packet_counter": float(pc), "sample_time_fine": float(stf)}
+            values: dict[str, float] = {
+                "roll_deg": e[0], "pitch_deg": e[1], "yaw_deg": e[2],
+                "packet_counter": float(pc), "sample_time_fine": float(stf)}
             if g is not None:
                 values["gyr_x"], values["gyr_y"], values["gyr_z"] = g
             if acc is not None:
@@ -435,7 +436,7 @@ class MtiSerialDriver(Driver):
             # a corrupted frame that happened to pass the checksum.
             self._inconsistent()
             return None
-        values: dict[str, float] = {}
+        values = {}
         v = items.get(XDI.EULER_ANGLES)
         if v is None and XDI.QUATERNION in items:
             v = quat_to_euler_deg(items[XDI.QUATERNION])

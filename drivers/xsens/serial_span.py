@@ -17,7 +17,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -37,6 +37,9 @@ from drivers.xsens.serial_driver import (
     orientations_agree,
     sample_time_slack_s,
 )
+
+if TYPE_CHECKING:
+    from shoveld.replay.sync import MemorySerial
 
 log = logging.getLogger(__name__)
 
@@ -145,7 +148,7 @@ class MtiSpanReader:
     that stamps its readings (capture time).
     """
 
-    def __init__(self, driver: MtiSerialDriver, port: Any, period: float) -> None:
+    def __init__(self, driver: MtiSerialDriver, port: MemorySerial, period: float) -> None:
         self.driver = driver
         self.port = port
         self.period = period

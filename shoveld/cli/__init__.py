@@ -12,7 +12,8 @@ import importlib
 import logging
 import os
 import sys
-from typing import NoReturn
+from collections.abc import Sequence
+from typing import Any, NoReturn
 
 SUBCOMMANDS: tuple[str, ...] = (
     "sim", "calibrate", "estimate", "diagnose", "decode", "record", "replay", "run",
@@ -38,7 +39,7 @@ class _Version(argparse._VersionAction):
     costs 14 ms of every command's start otherwise."""
 
     def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
-                 values: object, option_string: str | None = None) -> None:
+                 values: str | Sequence[Any] | None, option_string: str | None = None) -> None:
         self.version = f"shoveld {_version()}"
         super().__call__(parser, namespace, values, option_string)
 

@@ -76,7 +76,8 @@ def tls_from_args(args: argparse.Namespace) -> TlsConfig | None:
     from shoveld.daemon.config import TlsConfig
     from shoveld.security.pki import PkiError, check_peer_files
 
-    tls = TlsConfig(*(Path(x) for x in args.tls))
+    ca, certificate, key = (Path(x) for x in args.tls)
+    tls = TlsConfig(ca, certificate, key)
     for x in tls.ca, tls.certificate, tls.key:
         if not x.is_file():
             raise CliError(f"--tls: {x}: no such file")
@@ -462,17 +463,17 @@ class CabClient:
         for reply in replies:
             if reply.ok is None:
                 continue
-            key = str(reply.ok.key_expr).split("/")
+            parts = str(reply.ok.key_expr).split("/")
             try:
                 st = json.loads(reply.ok.payload.to_bytes())
             except ValueError:
-                self.state.on_bad_message(key[self._n], "status", "not JSON")
+                self.state.on_bad_message(parts[self._n], "status", "not JSON")
                 continue
             problem = status_problem(st)
             if problem is not None:
-                self.state.on_bad_message(key[self._n], "status", problem)
+                self.state.on_bad_message(parts[self._n], "status", problem)
                 continue
-            self.state.on_status(key[self._n], st)
+            self.state.on_status(parts[self._n], st)
             n += 1
         return n
 

@@ -98,9 +98,9 @@ def format_report(params: object) -> str:
     if "current_residual_rms_a" in fit:
         lines.append("residual current RMS: " + ", ".join(
             f"{k} {v:.3g} A" for k, v in fit["current_residual_rms_a"].items()))
-        for ch, n in params.current_noise.items():
-            lines.append(f"  noise model {ch}: {n['floor_a']:.3g} A + {100 * n['rel']:.2g} % of "
-                         f"the reading, correlation time {n['tau']:.1f} samples")
+        for ch, cn in params.current_noise.items():
+            lines.append(f"  noise model {ch}: {cn['floor_a']:.3g} A + {100 * cn['rel']:.2g} % "
+                         f"of the reading, correlation time {cn['tau']:.1f} samples")
         lines.append(f"standard errors: {fit['covariance']}")
     lines.append("residual RMS: " + ", ".join(
         f"{k} {v:.4g} {'N m' if k == 'handle' else 'N'}" for k, v in fit["residual_rms"].items()))

@@ -81,12 +81,13 @@ def run(args: argparse.Namespace) -> int:
         if est.trucks:
             next_truck = est.trucks[-1].index + 1
         trucks.extend(est.trucks)
-    summary = {"trucks": [t.as_dict() for t in trucks], "rule_10_10_20": rule_101020(trucks)}
+    rule = rule_101020(trucks)
+    summary = {"trucks": [t.as_dict() for t in trucks], "rule_10_10_20": rule}
     if args.json:
         print(json.dumps(summary), file=sys.stderr)
     elif trucks:
         print()
         for t in trucks:
             print(f"truck {t.index:3d}: {truck_line(t.as_dict())}")
-        print(f"10/10/20 over {rule_summary(summary['rule_10_10_20'], closed=False)}")
+        print(f"10/10/20 over {rule_summary(rule, closed=False)}")
     return 0

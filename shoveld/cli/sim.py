@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+from functools import partial
 from pathlib import Path
 
 from shoveld.cli import CliError
@@ -126,11 +127,11 @@ def run(args: argparse.Namespace) -> int:
 
         machine = replace(machine, sensors=machine.sensors.scaled(args.noise))
     if args.scenario == "cycles":
-        kw = {}
         if args.payload_range:
-            kw = {"payload_range": tuple(args.payload_range), "truck_target_kg": None}
+            lo, hi = args.payload_range
+            cycles = partial(iter_cycles, payload_range=(lo, hi), truck_target_kg=None)
         else:
-            kw = {"truck_target_kg": args.truck_target}
+            cycles = partial(iter_cycles, truck_target_kg=args.truck_target)
         # Streamed: a segment of whole trucks at a time goes to disk, so memory does not
         # grow with the number of passes (bench/sim_speed.py).
         out = Path(args.out)
@@ -138,9 +139,9 @@ def run(args: argparse.Namespace) -> int:
         passes: list = []
         samples, end = 0, 0.0
         with open(out, "w", encoding="utf-8", newline="\n") as f:
-            for part in iter_cycles(args.passes, args.seed,
-                                    verified_fraction=args.verified_fraction,
-                                    rate_hz=args.rate, effects=effects, machine=machine, **kw):
+            for part in cycles(args.passes, args.seed,
+                               verified_fraction=args.verified_fraction,
+                               rate_hz=args.rate, effects=effects, machine=machine):
                 if not truth:
                     truth = part.truth
                     write_header(f, part.table.meta)

@@ -18,7 +18,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from drivers.base import Driver
 from shoveld.daemon.assemble import Assembler
@@ -41,6 +41,9 @@ from shoveld.payload.misfit import (
 )
 from shoveld.payload.trucks import Truck, rule_101020
 from shoveld.sample import Sample
+
+if TYPE_CHECKING:
+    from shoveld.replay.bulk import BulkAssembler
 
 log = logging.getLogger(__name__)
 
@@ -103,8 +106,9 @@ class Service:
         self.store = ReadingStore(cfg.devices)
         self.drivers: dict[str, Driver] = drivers if drivers is not None else {
             name: build_driver(dev, self.driver_clock) for name, dev in cfg.devices.items()}
-        self.assembler = Assembler(cfg.devices, cfg.installation, self.store,
-                                   self._health_of)
+        self.assembler: Assembler | BulkAssembler = Assembler(
+            cfg.devices, cfg.installation, self.store, self._health_of)
+        """The live one; in bulk replay, the replayed samples (``shoveld.replay.service``)."""
         self.publisher = publisher or Publisher(cfg.zenoh, cfg.shovel_id, self.status)
         self.publisher.status = self.status
         self.notifier = notifier or Notifier()
@@ -468,8 +472,8 @@ class Service:
                 self.on_event("pass", msg)
         elif item[0] == "empty":
             # a check, not a weight: one try, and a failure is said (persist_error) as any
-            _, e, end_u, beyond = item
-            self.passlog.write_empty(e, end_u, self.cfg.engine.empty_warn_kg, beyond)
+            _, empty, end_u, beyond = item
+            self.passlog.write_empty(empty, end_u, self.cfg.engine.empty_warn_kg, beyond)
         else:
             _, tdict, closed, wall_t = item
             if closed:

@@ -50,7 +50,8 @@ class ReplayRun:
         svc = self.service
         paced = self.speed is not None and svc.driver_threads
         recording = getattr(self.session, "clock", None)
-        if getattr(recording, "held", False):  # it starts now (replay_service held it)
+        # it starts now (replay_service held it)
+        if recording is not None and getattr(recording, "held", False):
             recording.restart()
         if self.speed is None and svc.driver_threads and hasattr(self.session,
                                                                   "wait_connected"):
@@ -191,8 +192,8 @@ def _fast_replay_service(capture_dir: str | Path, cfg: DaemonConfig, params: Mod
                   publisher=publisher, driver_threads=False, record_stats=record_stats,
                   close_truck_at_end=close_truck_at_end)
     feed = BulkFeed(sync, rcfg.installation, rcfg.loop.rate_hz, rcfg.loop.health_period_s)
-    svc.assembler = BulkAssembler(feed, drivers, svc.store)  # type: ignore[assignment]
-    return ReplayRun(svc, BulkSession(sync, svc.assembler), None)
+    svc.assembler = assembler = BulkAssembler(feed, drivers, svc.store)
+    return ReplayRun(svc, BulkSession(sync, assembler), None)
 
 
 def replay_service(capture_dir: str | Path, cfg: DaemonConfig, params: ModelParams,
