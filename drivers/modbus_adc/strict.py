@@ -18,7 +18,7 @@ from pymodbus.pdu.register_message import (
 
 
 def _strict(base: type[Any]) -> type[Any]:
-    class Strict(base):  # type: ignore[misc, valid-type]
+    class Strict(base):
         def decode(self, data: bytes) -> None:
             if data and data[0] % 2:
                 raise ModbusIOException(f"odd byte count {data[0]} in a register response",

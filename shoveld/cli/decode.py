@@ -115,7 +115,7 @@ DECODERS: tuple[Decoder, ...] = (
 )
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
         "decode", help="decode a raw device byte stream to JSON lines",
         description="Decode a raw device byte stream (a capture or a serial sniff) into one "

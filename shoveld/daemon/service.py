@@ -57,7 +57,7 @@ def _jr(x: float, nd: int) -> str:
     return repr(round(x, nd)) if math.isfinite(x) else "null"
 
 
-_json_str = json.encoder.encode_basestring_ascii  # type: ignore[attr-defined]
+_json_str = json.encoder.encode_basestring_ascii
 
 
 def joints_json(wall: float, s: Sample) -> str:

@@ -169,7 +169,7 @@ def as_json(d: Diagnosis) -> dict[str, Any]:
                      "test": "per-pass held-out loss differences, one-sided t, Bonferroni "
                              "over the candidates of a step"}
     out["timing_s"] = {k: round(v, 3) for k, v in d.timing.items()}
-    return _round(out)  # type: ignore[no-any-return]
+    return _round(out)
 
 
 def _round(x: Any) -> Any:
