@@ -21,6 +21,11 @@ from shoveld.model import G, Kinematics, Model
 from shoveld.model.effects import (
     DRIVE_STREAM,
     EFFECT_TERMS,
+    BoomSuspensionSpring,
+    CurrentSaturation,
+    ExtensionTerm,
+    SensorTimeSkew,
+    SwingCentrifugal,
     _delay_errors,
     _parabola,
     _unit_hoist,
@@ -29,7 +34,13 @@ from shoveld.model.effects import (
 from shoveld.model.params import ModelParams, load_params, save_params
 from shoveld.model.terms import TERMS
 from shoveld.sample import samples_from_table
-from shoveld.sim.effects import DRUM_XY, SIM_EFFECTS, BoomSuspensionSpringEffect, make_effects
+from shoveld.sim.effects import (
+    DRUM_XY,
+    SIM_EFFECTS,
+    BoomSuspensionSpringEffect,
+    PayloadCogOffsetEffect,
+    make_effects,
+)
 from shoveld.sim.plant import PlantParams
 from shoveld.sim.scenario import SensorNoise, simulate_cycles
 from tests.diagnose.conftest import session
@@ -110,18 +121,19 @@ def test_no_extension_column_carries_the_measured_current_it_predicts(name: str)
     assert np.allclose(w1[:, :, nb:], w0[:, :, nb:])
 
 
-def _truth(effect: str, mag: float) -> tuple[list[str], dict, dict[str, float]]:
+def _truth(effect: str, mag: float
+           ) -> tuple[list[str], dict[str, dict[str, float]], dict[str, float]]:
     """Model terms, hyper-parameters and true parameter values for a sim effect."""
     pp = PlantParams()
     vals = {"Md": pp.Md, "MdLc": pp.Md * pp.Lc, "K_H": pp.K_H, "K_C": pp.K_C,
             "J": pp.Izz + pp.Md * pp.Lc**2, "fv3": pp.fv3, "fc3": pp.fc3, "fv4": pp.fv4,
             "fc4": pp.fc4, "i_H0": 0.0, "i_C0": 0.0}
-    hyper: dict = {}
+    hyper: dict[str, dict[str, float]] = {}
     if effect == "swing_centrifugal":
         hyper = {effect: {"R0_m": mag}}
         vals["dJ_sw"] = 0.0
     elif effect == "payload_cog_offset":
-        ang = math.radians(SIM_EFFECTS[effect].angle_deg)
+        ang = math.radians(PayloadCogOffsetEffect.angle_deg)
         vals["cog_fwd"], vals["cog_up"] = mag * math.cos(ang), mag * math.sin(ang)
     elif effect == "hoist_rope_mass":
         # the drum-side rope's constant tension is what a hoist current offset does
@@ -141,6 +153,7 @@ def test_model_term_explains_the_simulated_effect(effect: str, mag: float) -> No
     res = simulate_cycles(3, seed=7, payload_range=(20000.0, 30000.0), truck_target_kg=None,
                           effects=make_effects({effect: mag}), noise=QUIET)
     kin, ok = offline_kinematics(res.table)
+    assert res.motion is not None and res.ctx is not None  # simulate_cycles keeps both
     m_true = res.motion.payload[res.ctx["sample_index"]]
     sel = np.zeros(len(kin), dtype=bool)
     for p in res.passes:
@@ -153,6 +166,7 @@ def test_model_term_explains_the_simulated_effect(effect: str, mag: float) -> No
     ext = Model.from_names(terms, hyper)
     r_base = base.residual(k, np.array([vals[n] for n in base.param_names]), m_true[sel])
     # offsets act on the measured currents, outside the force residual
+    assert k.i_h_est is not None  # Kinematics.__post_init__ sets it
     k_ext = dataclasses.replace(k, i_h=k.i_h - vals["i_H0"], i_h_est=k.i_h_est - vals["i_H0"])
     r_ext = ext.residual(k_ext, np.array([vals[n] for n in ext.param_names]), m_true[sel])
     rms_b = np.sqrt(np.mean(r_base**2, axis=0))
@@ -162,7 +176,7 @@ def test_model_term_explains_the_simulated_effect(effect: str, mag: float) -> No
 
 def test_stream_delay_matches_the_offline_transform() -> None:
     res = simulate_cycles(1, seed=3, payload_range=(10000.0, 10000.0), truck_target_kg=None)
-    term = TERMS["sensor_time_skew"](delay_s=0.1)
+    term = SensorTimeSkew(delay_s=0.1)
     cols = term.transform(dict(res.table.columns))
     live = term.stream()
     assert live is not None
@@ -181,7 +195,7 @@ def test_one_late_device_is_realigned_alone_offline_and_live() -> None:
     the MTi's time, the MTi's own readings are left as they are."""
     res = simulate_cycles(1, seed=3, payload_range=(10000.0, 10000.0), truck_target_kg=None)
     cols0 = dict(res.table.columns)
-    term = TERMS["sensor_time_skew"](delay_s=0.1, crowd_lag_s=-0.1)
+    term = SensorTimeSkew(delay_s=0.1, crowd_lag_s=-0.1)
     cols = term.transform(cols0)
     t = np.asarray(cols0["time_s"])
     n = int(round(0.1 / float(np.median(np.diff(t)))))
@@ -291,7 +305,7 @@ def _boom_drop_on_trials(machine: Any, degrees: float, seed: int
     that pose (``_on_trials``): the drop at the pull the reference current gives at the
     fit's nominal field."""
     p, sag, sag_se = _on_trials(machine, "boom_suspension_spring", degrees, seed, "K_H_sag")
-    ref_a = TERMS["boom_suspension_spring"].defaults["ref_a"]
+    ref_a = float(BoomSuspensionSpring.defaults["ref_a"])
     truth = BoomSuspensionSpringEffect(degrees).drop_deg_at(machine.k_h_nominal(p) * ref_a)
     return math.degrees(sag), math.degrees(sag_se), truth
 
@@ -341,6 +355,7 @@ def test_the_swing_radius_is_found_where_the_trials_do_not_swing() -> None:
     assert needs_operation(model, ds)
     p = fit(ds, ["swing_centrifugal"], {}, {q.index for q in ds.passes if q.verified})
     term = p.model().terms[-1]
+    assert isinstance(term, SwingCentrifugal)
     (what, unit, value, std), = term.searched()
     assert unit == "m" and value == p.hyper["swing_centrifugal"]["R0_m"]
     assert abs(value - r0) <= min(2 * std, 0.1), (value, std)
@@ -405,6 +420,7 @@ def test_every_model_error_belongs_to_a_value_the_term_reports(name: str) -> Non
     """A model error is looked up by its value's wording: one that matches none would be
     left out of the reported uncertainty without a word."""
     term = TERMS[name]()
+    assert isinstance(term, ExtensionTerm)
     words = [q[0] for q in term.quantities()] + [q[0] for q in term.searched()]
     assert set(term.model_error) <= set(words)
     n = len(Model.from_names([name]).param_names)
@@ -416,8 +432,7 @@ def test_every_model_error_belongs_to_a_value_the_term_reports(name: str) -> Non
 def test_the_boom_drops_model_error_grows_with_the_reference_current() -> None:
     """The boom's drop is reported at the term's reference current; its model error,
     measured at 500 A, is a drop too: at 1,000 A it is twice as large."""
-    at_500, at_1000 = TERMS["boom_suspension_spring"](), TERMS["boom_suspension_spring"](
-        ref_a=1000.0)
+    at_500, at_1000 = BoomSuspensionSpring(), BoomSuspensionSpring(ref_a=1000.0)
     (w500, _, _), = at_500.quantities()
     (w1000, _, _), = at_1000.quantities()
     assert w1000 != w500 and at_500.error_of(w500) > 0
@@ -439,6 +454,7 @@ def test_params_file_records_terms_and_hyper(tmp_path) -> None:
     assert q.hyper["sensor_time_skew"]["delay_s"] == 0.08
     m2 = q.model()
     skew = [t for t in m2.terms if t.name == "sensor_time_skew"][0]
+    assert isinstance(skew, SensorTimeSkew)
     assert skew.hyper["delay_s"] == 0.08 and "delay_s" in skew.given
     k = _kin()
     assert np.allclose(m2.regressor(k)[0], model.regressor(k)[0])
@@ -498,17 +514,18 @@ def test_the_saturation_knee_sits_at_the_median_hoist_current_and_bends_the_pull
     i1 = np.array([50.0, 100.0, 150.0, 200.0, np.nan])
     tables = [SimpleNamespace(columns={"hoist1_a": i1, "hoist2_a": i1 + 10.0}),
               SimpleNamespace(columns={"hoist1_a": -i1, "hoist2_a": -i1})]
-    term = TERMS["current_saturation"]()
+    term = CurrentSaturation()
     assert term.for_data(tables) is term
     assert term.h("knee_a") == np.median([110, 210, 310, 410, 100, 200, 300, 400])
-    given = TERMS["current_saturation"](knee_a=333.0)
+    given = CurrentSaturation(knee_a=333.0)
     given.for_data(tables)
     assert given.h("knee_a") == 333.0
 
     k = _kin(200)
     k = dataclasses.replace(k, i_h_est=np.linspace(-600.0, 600.0, 200))
+    assert k.i_h_est is not None
     u_th, _ = _unit_hoist(k)
-    col = TERMS["current_saturation"](knee_a=250.0).columns(k)[:, 0, 0] / -u_th
+    col = CurrentSaturation(knee_a=250.0).columns(k)[:, 0, 0] / -u_th
     # five rounding widths (20 A) from the knee the hinge is within 20 ln(1 + e^-5) A
     low = np.abs(k.i_h_est) < 150.0
     high = k.i_h_est > 350.0

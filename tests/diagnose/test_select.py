@@ -15,11 +15,13 @@ removed at the end.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 
+from shoveld.diagnose.data import DataSet, Pass
 from shoveld.diagnose.report import candidate_verdict
 from shoveld.diagnose.select import SelectionConfig, _pair, _pairs_to_try, compare
 
@@ -41,8 +43,17 @@ def model(loss: float, payload_err_kg: float, spread: float = 0.02) -> Any:
                            effects=[])
 
 
-DATA = SimpleNamespace(passes=[SimpleNamespace(index=i, verified=True, payload_kg=10_000.0)
-                               for i in range(N)])
+def dataset(payloads_kg: Iterable[float]) -> DataSet:
+    """A diagnosis without tables whose passes are verified with these payloads: the
+    selection reads only its passes (the models' scores are made up)."""
+    data = DataSet(calib=[], measured=[])
+    data.passes = [Pass(index=i, table=0, start_s=0.0, end_s=0.0,
+                        eval_idx=np.zeros(0, dtype=int), payload_kg=m)
+                   for i, m in enumerate(payloads_kg)]
+    return data
+
+
+DATA = dataset([10_000.0] * N)
 
 
 def run(models: dict[tuple[str, ...], Any]) -> tuple[Any, list[Any]]:
@@ -427,8 +438,7 @@ def test_a_term_acting_per_kilogram_of_load_is_tested_where_the_load_is() -> Non
     rng = np.random.default_rng(11)
     loads = np.linspace(2_000.0, 34_000.0, N)
     rng.shuffle(loads)
-    data = SimpleNamespace(passes=[SimpleNamespace(index=i, verified=True, payload_kg=m)
-                                   for i, m in enumerate(loads)])
+    data = dataset(loads)
     share = 0.25 * (loads / loads.max()) ** 2   # its share of each pass's loss
     noise = 1.0 + 0.12 * rng.standard_normal(N)
     cur = per_pass(noise * (1.0 + share), 300.0)
