@@ -6,6 +6,7 @@ import time
 from collections.abc import Callable
 
 from drivers.base import Driver, Reading
+from drivers.capture.format import RegisterRead
 
 
 def collect(drv: Driver, seconds: float) -> list[Reading]:
@@ -15,6 +16,18 @@ def collect(drv: Driver, seconds: float) -> list[Reading]:
     while time.monotonic() < end:
         drv.read(out.append)
     return out
+
+
+def t_device(r: Reading) -> float:
+    """The device's own time of a reading from a driver that stamps every reading."""
+    assert r.t_device is not None, r
+    return r.t_device
+
+
+def answered(r: RegisterRead) -> tuple[int, ...]:
+    """The words of a recorded read that answered."""
+    assert r.registers is not None, r
+    return r.registers
 
 
 def wait_for(cond: Callable[[], bool], timeout: float = 5.0) -> None:

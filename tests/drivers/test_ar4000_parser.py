@@ -51,7 +51,7 @@ def test_splitter_never_keeps_more_than_max_line(chunks: list[bytes]) -> None:
 @given(st.lists(st.binary(max_size=80), max_size=20))
 def test_driver_parse_of_garbage_emits_only_good_distances(chunks: list[bytes]) -> None:
     drv = Ar4000Driver("laser", Ar4000Config(port="/dev/null"))
-    out = []
+    out: list[Reading] = []
     for c in chunks:
         drv._parse(c, out.append, 0.0)
     for r in out:

@@ -40,7 +40,8 @@ it (the last distance used is by then too old to measure from alone)."""
 def _replace(stream: list[tuple[float, bytes]], t0: float, t1: float,
              new: Callable[[int], bytes | None]) -> list[tuple[float, bytes]]:
     """The n-th line ending in [t0, t1) (from 1) replaced by ``new(n)``, where not None."""
-    out, n = [], 0
+    out: list[tuple[float, bytes]] = []
+    n = 0
     for t, data in stream:
         if t0 <= t < t1 and data.endswith(b"\n"):
             n += 1

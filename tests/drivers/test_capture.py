@@ -60,8 +60,9 @@ def test_round_trip(tmp_path: Path) -> None:
     assert m["installation"]["crowd_offset_m"] == 6.0
     assert cap.devices["laser"].settings["baudrate"] == 9600
     assert list(cap.serial_chunks("laser")) == [
-        SerialChunk(pytest.approx(0.001), "tx", b"A4\r"),
-        SerialChunk(pytest.approx(0.0105), "rx", b"1234\r\n\x00\xff")]
+        # approx stands for the recorded time: it compares equal to a float near it
+        SerialChunk(pytest.approx(0.001), "tx", b"A4\r"),  # type: ignore[arg-type]
+        SerialChunk(pytest.approx(0.0105), "rx", b"1234\r\n\x00\xff")]  # type: ignore[arg-type]
     reads = list(cap.modbus_reads("adc"))
     assert [r.registers for r in reads] == [(1, 65535, 32768), None, None]
     assert [r.error for r in reads] == [None, "timeout", "exception"]
@@ -256,7 +257,11 @@ def test_replay_clock_paced() -> None:
 def test_replay_clock_stepped_waits_for_settle_checks() -> None:
     c = ReplayClock(0.0, speed=None, settle_timeout_s=0.2)
     seen: list[float] = []
-    c.add_settle_check(lambda t: (seen.append(t) or True) and len(seen) > 2)
+
+    def settled(t: float) -> bool:
+        seen.append(t)
+        return len(seen) > 2
+    c.add_settle_check(settled)
     assert c.advance(0.5) == 0.5 and c() == 0.5 and len(seen) == 3
     c.add_settle_check(lambda t: False)
     t0 = time.monotonic()

@@ -17,13 +17,21 @@ from drivers.acuity import Ar4000Driver
 from drivers.base import Driver, Reading
 from drivers.capture import read_capture
 from drivers.capture.recorder import RecordConfigError, Recorder, load_record_config
-from drivers.capture.replay import ReplaySession, open_replay
+from drivers.capture.replay import (
+    CanEndpoint,
+    ModbusEndpoint,
+    ReplaySession,
+    SerialEndpoint,
+    open_replay,
+)
 from drivers.modbus_adc import ChannelMap, ModbusAdcDriver
 from hil_fixtures.ar4000 import Ar4000Emulator
 from hil_fixtures.modbus_adc import ModbusAdcEmulator
 from hil_fixtures.virtual_shovel import INCLINOMETER_CHANNELS, MOTOR_CHANNELS, DriverRunner
 from shoveld.installation import Installation
 from shoveld.signals import SignalsTable
+
+from .conftest import answered, t_device
 
 CAPTURES = Path(__file__).resolve().parents[2] / "hil_fixtures" / "captures"
 
@@ -102,7 +110,9 @@ def test_replay_through_the_same_drivers(recorded: tuple[Path, dict[str, Any]],
     rx = b"".join(c.data for c in cap.serial_chunks("laser") if c.direction == "rx")
     recorded_reads = [r for r in cap.modbus_reads("adc")]
     with open_replay(out, speed=speed) as s:
-        assert Path(s.endpoints["laser"].port).exists()  # a real tty the driver opens
+        ep = s.endpoints["laser"]
+        assert isinstance(ep, SerialEndpoint)
+        assert Path(ep.port).exists()  # a real tty the driver opens
         got = replay_through(s, {
             "laser": lambda c: Ar4000Driver.from_config("laser", c, clock=s.clock),
             "adc": lambda c: ModbusAdcDriver.from_config("adc", c, clock=s.clock)})
@@ -149,6 +159,7 @@ def test_modbus_tcp_replay_serves_on_a_free_local_port(tmp_path: Path) -> None:
         Recorder({"devices": {"adc": adc.driver_config(poll_hz=100)}}, out).run(0.3)
     with open_replay(out, speed=None) as s:
         ep = s.endpoints["adc"]
+        assert isinstance(ep, ModbusEndpoint)
         assert ep.host == "127.0.0.1" and ep.port and ep.port != adc.port
         got = replay_through(s, {"adc": lambda c: ModbusAdcDriver.from_config(
             "adc", c, clock=s.clock)})
@@ -174,7 +185,7 @@ def test_mti_serial_handshake_is_answered_from_the_recording(tmp_path: Path) -> 
         r = got["mti"]
         # paced replay streams while the driver does its handshake: the start may be lost
         assert len(r) > (0.4 if speed else 0.8) * recorded, speed
-        assert r[-1].values["pitch_deg"] == pytest.approx(10.0 + r[-1].t_device, abs=0.02)
+        assert r[-1].values["pitch_deg"] == pytest.approx(10.0 + t_device(r[-1]), abs=0.02)
 
 
 def test_an_mti_capture_from_before_the_quaternion_replays_as_recorded(tmp_path: Path) -> None:
@@ -223,7 +234,8 @@ def test_can_replay_through_python_can_virtual_bus(tmp_path: Path) -> None:
                                    "channel": channel}}}
         Recorder(cfg, out).run(0.5)
     with open_replay(out, speed=None) as s:
-        assert s.endpoints["mti"].channel != channel
+        ep = s.endpoints["mti"]
+        assert isinstance(ep, CanEndpoint) and ep.channel != channel
         got = replay_through(s, {"mti": lambda c: MtiCanDriver.from_config(
             {k: v for k, v in c.items() if k != "kind"}, clock=s.clock)})
     assert len(got["mti"]) > 30
@@ -329,7 +341,7 @@ def test_make_capture_from_a_signals_table(tmp_path: Path) -> None:
                     for x in lines if x.strip() and int(x)]
     assert len(err) > 100 and np.median(err) < 0.01 and np.percentile(err, 75) < 0.05
     reads = [r for r in cap.modbus_reads("adc_motors") if r.registers]
-    hoist = np.array([MOTOR_CHANNELS.decode(0, r.registers)["hoist1_a"] for r in reads])
+    hoist = np.array([MOTOR_CHANNELS.decode(0, answered(r))["hoist1_a"] for r in reads])
     want_h = np.interp([r.t + 100.0 for r in reads], table.time, table["hoist1_a"])
     assert len(reads) > 100 and np.median(np.abs(hoist - want_h)) < 10.0
     # and replays through the same drivers as recorded
@@ -363,10 +375,10 @@ def test_virtual_shovel_with_can_mti_and_rtu_modules(tmp_path: Path) -> None:
     cap = read_capture(tmp_path / "c")
     assert any(m.arbitration_id == 0x22 for _, m in cap.can_messages("mti"))  # EulerAngles
     reads = [r for r in cap.modbus_reads("adc_motors") if r.registers]
-    assert MOTOR_CHANNELS.decode(0, reads[-1].registers)["hoist1_a"] == pytest.approx(
+    assert MOTOR_CHANNELS.decode(0, answered(reads[-1]))["hoist1_a"] == pytest.approx(
         2000.0, abs=0.2)
     incl = [r for r in cap.modbus_reads("adc_incl") if r.registers]
-    assert INCLINOMETER_CHANNELS.decode(0, incl[-1].registers)["roll_deg"] == pytest.approx(
+    assert INCLINOMETER_CHANNELS.decode(0, answered(incl[-1]))["roll_deg"] == pytest.approx(
         1.5, abs=0.01)
 
 

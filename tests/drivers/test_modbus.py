@@ -127,7 +127,7 @@ def client_errors(caplog: pytest.LogCaptureFixture) -> list[logging.LogRecord]:
     """pymodbus's warnings and errors from the driver's client, not from the emulator's
     server (its threads are ``modbus-tcp-server`` and ``modbus-rtu-server``)."""
     return [r for r in caplog.records if r.name.startswith("pymodbus")
-            and r.levelno >= logging.WARNING and not r.threadName.startswith("modbus-")]
+            and r.levelno >= logging.WARNING and not (r.threadName or "").startswith("modbus-")]
 
 
 def fast(emu: ModbusAdcEmulator, **kw: object) -> ModbusAdcDriver:
@@ -197,13 +197,14 @@ def test_a_module_that_babbles_is_named_in_health(transport: str,
         chans = h.extra["channels"]
         assert all(what in c["last_error"] and c["state"] == "timeout"
                    for c in chans.values()), chans
-        assert what in h.last_error
+        assert h.last_error is not None and what in h.last_error
         assert "adc: babbling (malformed data)" in problems(
             {"adc": {"state": "invalid", **h.extra}}, {}, {"open": True}, {})
         assert not client_errors(caplog), caplog.text
         said = [r for r in caplog.records if "babbling" in r.getMessage()]
         assert len(said) == 1 and said[0].levelno == logging.WARNING, caplog.text  # once
         n = len(run.readings)
+        assert isinstance(run.driver, ModbusAdcDriver)
         run.driver.fault_hold_s = 0.3
         emu.server.garble = None
         assert run.wait_for(lambda: len(run.readings) > n + 3 and not run.readings[-1].invalid,
@@ -230,13 +231,14 @@ def test_a_module_that_answers_after_the_timeout_is_named_in_health(
             # on a loaded machine fewer do (at 5 s, 3 of 8 runs had fewer than three
             # beside three busy processes on two cores, 2026-11-30)
             assert run.wait_for(lambda: h.extra["late_answers"] >= 3, 20), h.extra
-        assert h.extra["answering_late"] and "answers after the 0.05 s timeout" in \
-            h.last_error
+        assert h.extra["answering_late"] and h.last_error is not None \
+            and "answers after the 0.05 s timeout" in h.last_error
         said = problems({"adc": {"state": "ok", **h.extra}}, {}, {"open": True}, {})
         assert [p for p in said if p.startswith("adc: answering after its timeout (")], said
         assert not client_errors(caplog), caplog.text
         warned = [r for r in caplog.records if "answering late" in r.getMessage()]
         assert len(warned) == 1, caplog.text  # once, not once a poll
+        assert isinstance(run.driver, ModbusAdcDriver)
         run.driver.fault_hold_s = 0.3
         emu.server.delay_s = 0.0
         assert run.wait_for(lambda: not h.extra["answering_late"], 3)
@@ -349,7 +351,7 @@ def test_a_module_that_takes_the_link_and_never_answers_is_retried_less_and_less
             assert delays()[:5] == [0.1, 0.2, 0.4, 0.8, 0.8], delays()
             assert drv.health.reconnects >= 4 and not any(r.values for r in run.readings)
             emu.silent = False
-            assert run.wait_for(lambda: run.readings and run.readings[-1].values, 10)
+            assert run.wait_for(lambda: bool(run.readings and run.readings[-1].values), 10)
             n = len(delays())
             emu.silent = True
             assert run.wait_for(lambda: len(delays()) > n, 10)
@@ -377,6 +379,7 @@ def test_register_log_sees_every_read() -> None:
             assert run.wait_for(lambda: any(r.error == "timeout" for r in log), 5)
     ok = [r for r in log if r.registers is not None]
     assert ok[0].function == 4 and ok[0].address == 0 and ok[0].count == 4
+    assert ok[0].registers is not None
     assert CHANNELS.decode(0, ok[0].registers)["hoist1_a"] == pytest.approx(2345.6, abs=0.2)
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -118,8 +119,10 @@ def test_a_value_that_is_no_number_goes_to_the_per_tick_poll(
         drv, port, clock = _setup("adc_incl", damage=False)
         address, count, chans, decoders = drv._plan[0]
         name, offset, decode, h = decoders[0]
-        drv._plan[0] = (address, count, chans, ((name, offset, lambda w, _d=decode:
-                                                 math.nan if w == word else _d(w), h),
+
+        def nan_at_word(w: int, _d: Callable[[int], float] = decode) -> float:
+            return math.nan if w == word else _d(w)
+        drv._plan[0] = (address, count, chans, ((name, offset, nan_at_word, h),
                                                 *decoders[1:]))
         runs.append(_play(drv, port, clock, 1500, window))
     assert any("-" in r[2] for r in runs[0][0])
@@ -167,4 +170,5 @@ def test_a_blocks_arrays_hold_each_reads_words_and_outcome(case: str) -> None:
     for i, r in enumerate(reads):
         good = r.registers is not None and len(r.registers) == 3
         assert bool(b.answered[i]) is good
-        assert b.words[i].tolist() == (list(r.registers) if good else [0, 0, 0])
+        assert b.words[i].tolist() == (list(r.registers) if good and r.registers is not None
+                                       else [0, 0, 0])

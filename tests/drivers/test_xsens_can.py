@@ -16,7 +16,7 @@ from drivers.xsens.orientation import gravity_in_sensor
 from hil_fixtures.mti_can import MtiCanEmulator
 from shoveld.installation import wrap_deg
 
-from .conftest import collect, wait_for
+from .conftest import collect, t_device, wait_for
 
 _channels = itertools.count()
 
@@ -48,7 +48,8 @@ def test_codec_round_trip_and_saturation(byteorder: str) -> None:
     assert codec.decode(0x34, bytes(big.data)) == ("acceleration", (32767 / 256, -128.0,
                                                                      9.80859375))
     q = codec.encode("quaternion", (1.0, 0.0, -1.0, 0.5))
-    assert codec.decode(0x21, bytes(q.data))[1] == (32767 / 32768, 0.0, -1.0, 0.5)
+    quat = codec.decode(0x21, bytes(q.data))
+    assert quat is not None and quat[1] == (32767 / 32768, 0.0, -1.0, 0.5)
     assert codec.decode(0x05, bytes(codec.encode("sample_time", 123456.0).data)) == (
         "sample_time", (123456.0,))
     assert codec.decode(0x22, b"\x00") is None  # too short
@@ -70,7 +71,7 @@ def test_driver_against_emulator_values_match() -> None:
     assert all(b - a == 1 for a, b in zip(counters, counters[1:], strict=False))
     for r in readings:
         assert not r.invalid
-        want = source(r.t_device)
+        want = source(t_device(r))
         for k, w in zip(("roll_deg", "pitch_deg", "yaw_deg"), want, strict=True):
             assert abs(wrap_deg(r.values[k] - w)) <= 2 ** -8 + 1e-9  # half an LSB of 2^-7
         for k, g in zip(("acc_x", "acc_y", "acc_z"), gravity_in_sensor(want[0], want[1]),
@@ -92,7 +93,7 @@ def test_quaternion_mode_and_custom_ids() -> None:
         drv.close()
     assert len(readings) >= 15
     for r in readings:
-        want = source(r.t_device)
+        want = source(t_device(r))
         for k, w in zip(("roll_deg", "pitch_deg", "yaw_deg"), want, strict=True):
             assert abs(wrap_deg(r.values[k] - w)) < 0.01
         assert "status_word" not in r.values and not r.invalid

@@ -26,7 +26,7 @@ from hil_fixtures.mti import MtiEmulator, angles_from_signals
 from shoveld.installation import Installation, wrap_deg
 from shoveld.signals import SignalsTable
 
-from .conftest import collect, wait_for
+from .conftest import collect, t_device, wait_for
 
 
 def source(t: float) -> tuple[float, float, float]:
@@ -92,7 +92,7 @@ def test_streaming_values_match_the_source(emu: MtiEmulator, precision: str, tol
     assert drv.health.extra["dropped_packets"] == 0 and drv.health.rejected_bytes == 0
     for r in readings:
         assert not r.invalid
-        want = source(r.t_device)
+        want = source(t_device(r))
         got = (r.values["roll_deg"], r.values["pitch_deg"], r.values["yaw_deg"])
         assert max(ang_err(a, b) for a, b in zip(got, want, strict=True)) <= tol * 10
         g = gravity_in_sensor(want[0], want[1])
@@ -112,7 +112,7 @@ def test_quaternion_fp1632_ned_is_converted_to_euler(emu: MtiEmulator) -> None:
     assert XDI.QUATERNION | NED | FP1632 in dict(emu.outputs)
     assert len(readings) >= 15
     for r in readings:
-        want = source(r.t_device)
+        want = source(t_device(r))
         for k, w in zip(("roll_deg", "pitch_deg", "yaw_deg"), want, strict=True):
             assert ang_err(r.values[k], w) < 1e-6
 
@@ -147,9 +147,9 @@ def test_the_emulator_sends_on_the_clock_it_is_given() -> None:
         clock.t += 0.005  # nothing more is due: nothing more comes
         readings += collect(drv, 0.1)
         drv.close()
-    assert [round(r.t_device, 4) for r in readings] == [k / 100 for k in range(1, 101)]
+    assert [round(t_device(r), 4) for r in readings] == [k / 100 for k in range(1, 101)]
     for r in readings[::10]:
-        assert ang_err(r.values["yaw_deg"], source(r.t_device)[2]) < 1e-4
+        assert ang_err(r.values["yaw_deg"], source(t_device(r))[2]) < 1e-4
 
 
 def test_signals_table_source_through_the_installation() -> None:
@@ -165,7 +165,7 @@ def test_signals_table_source_through_the_installation() -> None:
         drv.close()
     assert len(readings) >= 20
     for r in readings:
-        ts = r.t_device
+        ts = t_device(r)
         assert r.values["roll_deg"] == 0.0
         assert inst.handle_deg(r.values["pitch_deg"]) == pytest.approx(
             np.interp(ts, t, table["handle_deg"]), abs=1e-4)
@@ -186,7 +186,7 @@ def test_noise_and_corruption_are_counted_and_survived() -> None:
     assert h.extra["dropped_packets"] > 0  # corrupted packets are lost, and counted
     for r in readings:
         if not r.invalid:
-            assert ang_err(r.values["yaw_deg"], source(r.t_device)[2]) < 1e-4
+            assert ang_err(r.values["yaw_deg"], source(t_device(r))[2]) < 1e-4
 
 
 def test_dropped_packets_and_device_errors(emu: MtiEmulator) -> None:
@@ -264,7 +264,7 @@ def test_unplug_and_plug_back_reconnects_with_backoff(emu: MtiEmulator) -> None:
         th.join(3.0)
     assert not th.is_alive() and not drv.health.connected
     late = readings[-1]
-    assert ang_err(late.values["yaw_deg"], source(late.t_device)[2]) < 1e-4
+    assert ang_err(late.values["yaw_deg"], source(t_device(late))[2]) < 1e-4
 
 
 def test_silent_device_times_out_and_comes_back(emu: MtiEmulator) -> None:
