@@ -48,10 +48,10 @@ def cycles(machine: Machine, dipper: float = 1.0, passes: int = PASSES) -> SimRe
 
 
 def weigh(res: SimResult, params: ModelParams, caplog: pytest.LogCaptureFixture,
-          **cfg: float) -> tuple[Estimate, list[str]]:
+          empty_warn_kg: float = EngineConfig.empty_warn_kg) -> tuple[Estimate, list[str]]:
     caplog.clear()
     with caplog.at_level(logging.WARNING, logger="shoveld.engine.loop"):
-        est = estimate_table(res.table, params, EngineConfig(**cfg))
+        est = estimate_table(res.table, params, EngineConfig(empty_warn_kg=empty_warn_kg))
     return est, [r.getMessage() for r in caplog.records if "empty dipper" in r.getMessage()]
 
 

@@ -196,6 +196,7 @@ def test_every_subcommand_has_help(capsys: pytest.CaptureFixture[str]) -> None:
 
     parser = build_parser()
     sub = next(a for a in parser._actions if a.dest == "command")
+    assert sub.choices is not None
     assert {"sim", "calibrate", "estimate"} <= set(sub.choices)
     for name in sub.choices:
         with pytest.raises(SystemExit) as ei:

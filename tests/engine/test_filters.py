@@ -244,7 +244,9 @@ def test_the_newey_west_sums_carry_lags_across_blocks() -> None:
         b = a * 18000.0 + rng.normal(0, 1, (n, 2)) * 3.0
         sig = rng.uniform(2.0, 4.0, (n, 2))
         rls.update(a, b, sigma=sig)
-        rows_a.append(a), rows_b.append(b), rows_v.append(sig**2)
+        rows_a.append(a)
+        rows_b.append(b)
+        rows_v.append(sig**2)
     a, b, v = np.vstack(rows_a), np.vstack(rows_b), np.vstack(rows_v)
     s = np.sum(a * (b - a * rls.payload_kg) / v, axis=1)
     var = s @ s + sum(2 * (1 - j / (lag + 1)) * (s[j:] @ s[:-j]) for j in range(1, lag + 1))

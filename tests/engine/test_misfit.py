@@ -18,7 +18,7 @@ from shoveld.engine.offline import estimate_table
 from shoveld.identify.calibrate import Calibrator
 from shoveld.model.params import ModelParams
 from shoveld.payload.misfit import MISFIT_WARN, misfit_note, round_misfit
-from shoveld.sim.effects import SIM_EFFECTS, make_effects
+from shoveld.sim.effects import SIM_EFFECTS, SimEffect, make_effects
 from shoveld.sim.machine import Machine
 from shoveld.sim.scenario import SimResult, simulate_calibration, simulate_cycles
 
@@ -32,7 +32,7 @@ def calibrated_session(spec: dict[str, float], seed: int, passes: int = PASSES
     3-35 t on it."""
     machine = Machine.draw(seed)
 
-    def fx() -> list[object]:
+    def fx() -> list[SimEffect]:
         return make_effects(dict(spec), form="test")
 
     trials = [simulate_calibration(kg, seed + k, effects=fx(), machine=machine).table

@@ -10,6 +10,7 @@ import pytest
 
 from shoveld.cli import main
 from shoveld.model.params import ParamsFileError, load_params
+from shoveld.model.terms import HoistDrive
 
 GOOD = Path(__file__).resolve().parents[2] / "hil_fixtures" / "captures" / "daemon-e2e" / \
     "params.toml"
@@ -102,12 +103,19 @@ def test_the_field_curve_below_its_lowest_knot_and_its_ends_are_read_or_refused(
         load_params(p)
 
 
+def hoist_drive(path: Path) -> HoistDrive:
+    """The hoist drive's term (the model's second) of a params file's model."""
+    term = load_params(path).model().terms[1]
+    assert isinstance(term, HoistDrive)
+    return term
+
+
 def test_the_field_curve_above_its_top_knot_is_read_or_refused(tmp_path: Path) -> None:
     """Files written before the key keep the flat curve they were identified with."""
-    assert load_params(GOOD).model().terms[1].above == "flat"
+    assert hoist_drive(GOOD).above == "flat"
     head = "[hyper.hoist_drive]\n"
     p = variant(tmp_path, head, head + 'above_top_knot = "slope"\n')
-    assert load_params(p).model().terms[1].above == "slope"
+    assert hoist_drive(p).above == "slope"
     p = variant(tmp_path, head, head + 'above_top_knot = "up"\n')
     with pytest.raises(ParamsFileError, match=r"params\.toml: hyper\.hoist_drive\.above_top_knot: "
                                               r"expected 'slope' or 'flat', got 'up'"):

@@ -8,6 +8,7 @@ vector geometry. A sign or factor error in any term of the regressor fails it.
 from __future__ import annotations
 
 import dataclasses
+from typing import TypeVar
 
 import numpy as np
 import pytest
@@ -15,6 +16,8 @@ import pytest
 from shoveld.model import G, Kinematics, Model
 from shoveld.model.terms import payload_phi
 from shoveld.sim.plant import PlantParams, rope_force_geometry
+
+Currents = TypeVar("Currents", np.ndarray, float)
 
 MD, LC, IZZ, KH, KC, FV3, FV4 = 56960.0, 3.27, 6.0e5, 1715.0, 4418.0, 1.5e5, 2.0e4
 
@@ -141,7 +144,7 @@ def test_the_field_curve_goes_on_along_its_slope_just_below_the_lowest_knot() ->
     from shoveld.model.terms import field_basis
 
     knots = (30.0, 40.0, 50.0, 60.0, 70.0)
-    def curve(x: np.ndarray) -> np.ndarray:  # a Froehlich magnetisation curve
+    def curve(x: Currents) -> Currents:  # a Froehlich magnetisation curve
         return x / (40.0 + x)
 
     y = curve(np.array(knots))

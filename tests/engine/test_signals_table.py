@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 import pytest
@@ -159,7 +161,7 @@ def test_samples_come_out_row_by_row_across_chunks() -> None:
 
     n = 2 * SAMPLE_CHUNK + 7
     rng = np.random.default_rng(0)
-    cols = {c: rng.normal(size=n) for c in COLUMN_NAMES}
+    cols: dict[str, np.ndarray] = {c: rng.normal(size=n) for c in COLUMN_NAMES}
     cols["time_s"] = np.arange(n) * 0.02
     cols["crowd_a"][SAMPLE_CHUNK] = np.nan
     table = SignalsTable.from_arrays(meta={"sample_rate_hz": "50"}, **cols)
@@ -177,13 +179,17 @@ _ODD_CELLS = ("", " ", "nan", "NaN", "inf", "-inf", "1e3", "1E-2", "+1", "-0", "
               "Infinity", "+.5", "1e+3", "1e", "e3", ".", "-", "+", "0x1p3", "\u0661", "1'2")
 
 
-def _read_both(text: str, chunk_rows: int) -> tuple[object, object]:
+Read = SignalsTable | tuple[str, int | None, str | None]
+"""A table read, or the error's text, line and column."""
+
+
+def _read_both(text: str, chunk_rows: int) -> tuple[Read, Read]:
     """The table (or the error's text, line and column) by the default reader and by the
     cell-by-cell path alone; ``chunk_rows`` sets the size of both paths' pieces: rows for
     the cell-by-cell reader, 100 bytes each for Arrow's blocks (a row or a few)."""
     import shoveld.signals.table as T
 
-    def read() -> object:
+    def read() -> Read:
         try:
             tab = T.read_table("t.csv", text)
         except SignalsFormatError as e:
@@ -256,10 +262,13 @@ def test_blanks_at_row_ends_and_inside_rows_are_read_by_the_fast_path_itself(
     body = [ROW.format(t=k * 0.02) for k in range(6)]
     body[4] = body[4].replace(",30,45,", ",,45,")
     text = HEADER + "\n" + "\n".join(body) + "\n"
-    taken: list[object] = []
+    taken: list[T._Columns | None] = []
     fast_read = T._read_fast
-    monkeypatch.setattr(T, "_read_fast", lambda data, offset: taken.append(
-        fast_read(data, offset)) or taken[-1])
+
+    def read_fast(data: Callable[[], BinaryIO], offset: int) -> T._Columns | None:
+        taken.append(fast_read(data, offset))
+        return taken[-1]
+    monkeypatch.setattr(T, "_read_fast", read_fast)
     fast, slow = _read_both(text, 20_000)
     assert isinstance(taken[0], T._Columns) and taken[0].rows == 6
     assert isinstance(fast, SignalsTable) and isinstance(slow, SignalsTable)

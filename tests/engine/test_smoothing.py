@@ -82,6 +82,7 @@ def test_how_much_of_a_1_hz_acceleration_each_fit_keeps(window_s: float, order: 
     for i in range(400):
         out = f.push(i * dt, (float(np.sin(w * i * dt)),), i)
         if out is not None:
+            assert out[0] is not None  # every sample pushed has its index as its tag
             got.append(out[1][2, 0])
             want.append(-w * w * np.sin(w * out[0] * dt))
     gain = np.std(got) / np.std(want)

@@ -19,10 +19,11 @@ from shoveld.sample import CROWD_TARGET_CHANGED, Sample, samples_from_table
 from shoveld.sim.scenario import SimResult
 
 
-def _run(params: ModelParams, samples: list[Sample], **cfg: float
+def _run(params: ModelParams, samples: list[Sample], *,
+         min_crowd_travel_m: float = EngineConfig.min_crowd_travel_m
          ) -> tuple[list[PassResult], list[LiveEstimate]]:
     eng = Engine(params, EngineConfig(rate_hz=1.0 / (samples[1].time_s - samples[0].time_s),
-                                      **cfg))
+                                      min_crowd_travel_m=min_crowd_travel_m))
     passes: list[PassResult] = []
     live: list[LiveEstimate] = []
     for s in samples:

@@ -33,7 +33,7 @@ def stream(seed: int, n: int = 8000) -> list[tuple[float, float, float, float]]:
     dropout (a filter coasts out and restarts), and jittered times."""
     rng = np.random.default_rng(seed)
     dt = 0.01
-    out = []
+    out: list[tuple[float, float, float, float]] = []
     k = 0
     while len(out) < n:
         k += 1 + (rng.random() < 0.001) * int(rng.integers(1, 4))  # skipped ticks
