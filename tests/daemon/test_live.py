@@ -57,7 +57,7 @@ def test_faults_are_reported_and_the_loop_keeps_its_rate(
             assert svc.wait_drivers(10.0), {n: d.health.last_error
                                             for n, d in svc.drivers.items()}
             assert peer.stdout is not None and peer.stdout.readline().strip() == "up"
-            assert wait_for(lambda: svc.health_msg and svc.health_msg["ok"], 5.0), \
+            assert wait_for(lambda: bool(svc.health_msg and svc.health_msg["ok"]), 5.0), \
                 problems_of(svc)
             # health is refreshed every period: the new peer shows in the next one
             assert wait_for(lambda: svc.health_msg is not None

@@ -46,7 +46,7 @@ def test_joints_text_is_dumps_of_the_dict() -> None:
 def test_live_text_is_dumps_of_the_live_message() -> None:
     rng = random.Random(2)
     svc = Service.__new__(Service)  # only the live-message builders are used
-    svc.clock = SimpleNamespace(wall=lambda t: 1.7e9 + t)  # type: ignore[assignment]
+    svc.clock = SimpleNamespace(wall=lambda t: 1.7e9 + t)
     svc._live_built = None
     for _ in range(3000):
         ev = SimpleNamespace(time_s=rng.uniform(0, 1e5), payload_kg=value(rng),

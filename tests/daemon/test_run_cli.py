@@ -18,8 +18,10 @@ from hil_fixtures.virtual_shovel import VirtualShovel
 from shoveld.cli.demo import write_demo_config
 from shoveld.daemon.notify import Notifier
 from shoveld.daemon.service import Service
+from shoveld.engine.loop import Event
 from shoveld.model.params import ModelParams
 from shoveld.replay.table import table_service
+from shoveld.sample import Sample
 from shoveld.signals.table import SignalsTable
 
 from .conftest import PARAMS, free_port, make_cfg
@@ -116,12 +118,12 @@ def test_a_failing_tick_is_counted_and_persistent_failure_starves_the_watchdog(
     real_step = engine.step
     fail = {"n": 1}
 
-    def flaky(s: object) -> list[object]:
+    def flaky(s: Sample) -> list[Event]:
         if fail["n"] > 0:
             fail["n"] -= 1
             raise ValueError("strange reading")
-        return real_step(s)  # type: ignore[arg-type]
-    engine.step = flaky  # type: ignore[method-assign]
+        return real_step(s)
+    engine.step = flaky  # type: ignore[method-assign]  # the engine's step fails on cue
     try:
         svc.run(threading.Event(), max_ticks=20)
         assert svc.tick_errors == 1 and svc.loop_stats.ticks == 20

@@ -15,7 +15,7 @@ from shoveld.daemon.persist import db_path, read_empties
 from shoveld.engine.loop import EngineConfig
 from shoveld.engine.offline import estimate_table
 from shoveld.model.params import ModelParams
-from shoveld.replay.table import Fault, table_service
+from shoveld.replay.table import Fault, TableFeed, table_service
 from shoveld.signals.table import SignalsTable
 from shoveld.sim.machine import Machine
 from shoveld.web.state import ScreenState
@@ -131,9 +131,15 @@ def test_replay_on_a_simulated_clock_is_deterministic(tmp_path: Path, e2e_table:
         got: list[dict[str, Any]] = []
         cfg = make_cfg(tmp_path / str(i))
         svc, feed = table_service(e2e_table, cfg, params, close_truck_at_end=True)
-        svc.on_event = lambda k, m, got=got: got.append({"topic": k, **m})
+
+        def on_event(k: str, m: dict[str, Any], got: list[dict[str, Any]] = got) -> None:
+            got.append({"topic": k, **m})
+        svc.on_event = on_event
         svc.start()
-        svc.run(threading.Event(), done=lambda feed=feed: feed.finished)
+
+        def done(feed: TableFeed = feed) -> bool:
+            return feed.finished
+        svc.run(threading.Event(), done=done)
         svc.flush()
         svc.close()
         runs.append(got)
@@ -260,12 +266,18 @@ def test_a_throwaway_pass_log_is_not_synced_and_holds_the_same_passes(
         svc, feed = table_service(e2e_table, cfg, params, close_truck_at_end=True)
         assert svc.durable_pass_log is True  # the live default
         svc.durable_pass_log = durable
-        svc.on_event = lambda k, m, got=got: got.append({"topic": k, **m})
+
+        def on_event(k: str, m: dict[str, Any], got: list[dict[str, Any]] = got) -> None:
+            got.append({"topic": k, **m})
+        svc.on_event = on_event
         svc.start()
         assert svc.passlog is not None
         syncs.append(svc.passlog.con.execute("PRAGMA synchronous").fetchone()[0])
         assert svc.passlog.con.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
-        svc.run(threading.Event(), done=lambda feed=feed: feed.finished)
+
+        def done(feed: TableFeed = feed) -> bool:
+            return feed.finished
+        svc.run(threading.Event(), done=done)
         t0 = time.monotonic()
         assert svc.flush(timeout_s=10.0)
         assert time.monotonic() - t0 < 5.0
@@ -455,11 +467,11 @@ def test_passes_on_something_the_laser_took_for_the_handle_in_an_outage_are_not_
     # the live estimate says the crowd is in doubt from the gap on, so that the cab marks
     # the number it shows before the dump (the pass is judged only at its end); before
     # the gap it says nothing
-    said = {n: {m["crowd_doubt"] for m in live if m["valid"] and m["pass"] == n}
-            for n in range(1, 6)}
-    assert said[1] == said[2] == {None}
-    assert "had no reading for 1.0 s" in said[3]  # the gap came in its lift
-    assert said[4] == said[5] == {"had no reading for 1.0 s"}
+    doubts = {n: {m["crowd_doubt"] for m in live if m["valid"] and m["pass"] == n}
+              for n in range(1, 6)}
+    assert doubts[1] == doubts[2] == {None}
+    assert "had no reading for 1.0 s" in doubts[3]  # the gap came in its lift
+    assert doubts[4] == doubts[5] == {"had no reading for 1.0 s"}
 
 
 def test_a_calibration_whose_verified_passes_fit_worse_is_a_problem_health_names(
@@ -476,12 +488,12 @@ def test_a_calibration_whose_verified_passes_fit_worse_is_a_problem_health_names
     from shoveld.sim.scenario import simulate_calibration, simulate_cycles
 
     machine, trials_only = machine_and_params
-    swing = {"effects": swing_effects()}
-    trials = [simulate_calibration(kg, 2010 + k, machine=machine, **swing).table
+    swing = swing_effects()
+    trials = [simulate_calibration(kg, 2010 + k, machine=machine, effects=swing).table
               for k, kg in ((1, 0.0), (2, 8420.0))]
     verified = simulate_cycles(6, 2013, machine=machine, verified_fraction=1.0,
                                payload_range=(3000.0, 35000.0), truck_target_kg=None,
-                               **swing).table
+                               effects=swing).table
     cal, used, _ = calibrate_with_verified(Model.from_names([]), trials, [verified])
     params = cal.params_
     assert params is not None and used == 6

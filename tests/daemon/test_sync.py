@@ -52,9 +52,10 @@ def stream(first: float, n: int, period: float = P, delays: Callable[[int], floa
 
 
 def run_loop(clock: SimClock, master: Master, ticks: int, delay_s: float = 0.001,
-             work_s: float = 0.0002, start: float = 0.0, **kw: float
+             work_s: float = 0.0002, start: float = 0.0, lost_after_s: float | None = None
              ) -> tuple[list[float], PhaseLock]:
-    pll = PhaseLock(P, master.ref, history=master.history, delay_s=delay_s, **kw)
+    pll = PhaseLock(P, master.ref, history=master.history, delay_s=delay_s,
+                    lost_after_s=lost_after_s)
     seen: list[float] = []
 
     def tick(t: float) -> None:
@@ -145,7 +146,7 @@ def test_a_master_at_half_the_loop_rate_locks_every_other_tick() -> None:
     clock = SimClock(0.0)
     master = Master(clock, stream(0.0133, 1000, period=2 * P))
     ticks, _ = run_loop(clock, master, 2000)
-    after = [t - master.before(t) for t in ticks[300:] if master.before(t) is not None]
+    after = [t - b for t in ticks[300:] if (b := master.before(t)) is not None]
     # half of the ticks come ~1 ms after a reading, the others one period later
     near = [x for x in after if x < 0.005]
     assert len(near) == pytest.approx(len(after) / 2, abs=2)
