@@ -33,6 +33,7 @@ def test_an_option_sim_would_ignore_is_refused(
         tmp_path: Path, argv: list[str], expected: str,
         capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "s.csv"
+    code: str | int | None  # main's exit code, or what argparse exits with
     try:
         code = main(["sim", *argv, "--out", str(out)])
     except SystemExit as e:  # argparse's own refusals

@@ -22,7 +22,7 @@ from hil_fixtures.regress import captures
 from shoveld.daemon.config import parse_config
 from shoveld.installation import Installation, unwrap_deg
 from shoveld.model.params import load_params
-from shoveld.replay.bulk import unwrapped_swing
+from shoveld.replay.bulk import BulkAssembler, unwrapped_swing
 from shoveld.replay.service import fast_replay_service
 from shoveld.sample import CROWD_TARGET_CHANGED, Sample
 
@@ -68,10 +68,12 @@ def _replay(capture: Path, tmp: Path, bulk: bool, until_s: float | None = None,
     for device, gap in (gaps or {}).items():
         _silence(sync.transports[device], *gap)
     if span_ticks is not None:
+        assert isinstance(svc.assembler, BulkAssembler)  # a span is the bulk feed's
         svc.assembler.feed.span_ticks = span_ticks
     got: dict[str, Any] = {"samples": [], "health": [], "pass": [], "truck": []}
     sample = svc.assembler.sample
-    svc.assembler.sample = lambda t: got["samples"].append(sample(t)) or got["samples"][-1]
+    svc.assembler.sample = (  # type: ignore[method-assign]  # each sample is kept
+        lambda t: got["samples"].append(sample(t)) or got["samples"][-1])
     publish_health = svc._publish_health
 
     def health(t: float) -> None:

@@ -149,7 +149,7 @@ def test_the_cab_page_shows_the_truck_and_what_is_left(run: Run) -> None:
     run.loop.join(120)
     assert not run.loop.is_alive()
     run.svc.flush()
-    assert wait_for(lambda: run.trucks[-1].get("closed"), 5.0), run.trucks
+    assert wait_for(lambda: bool(run.trucks[-1].get("closed")), 5.0), run.trucks
     final = run.trucks[-1]
     assert final.get("closed"), run.trucks
     assert wait_for(lambda: shows(final) and "sent off" in run.text("hint"), 10.0), \

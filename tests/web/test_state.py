@@ -27,8 +27,10 @@ def test_last_pass_hint_tops_off_without_passing_110_percent() -> None:
 
 
 def test_warnings_name_the_overload_and_only_a_closed_truck_is_under() -> None:
-    assert truck_warning({"status": "over_120", "fill_pct": 123.0})["level"] == "alarm"
-    assert "110" in truck_warning({"status": "over_110", "fill_pct": 112.0})["text"]
+    alarm = truck_warning({"status": "over_120", "fill_pct": 123.0})
+    assert alarm is not None and alarm["level"] == "alarm"
+    warn = truck_warning({"status": "over_110", "fill_pct": 112.0})
+    assert warn is not None and "110" in warn["text"]
     assert truck_warning({"status": "under", "fill_pct": 34.0}) is None  # still loading
     assert truck_warning({"status": "under", "fill_pct": 34.0, "closed": True}) is not None
 
