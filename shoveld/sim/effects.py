@@ -9,7 +9,7 @@ written independently (see ``docs/diagnosis.md``).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any, ClassVar
 
 import numpy as np
@@ -72,7 +72,7 @@ class SimEffect:
         """May change the measured columns (sensor effects), in place."""
 
 
-def make_effects(spec: dict[str, float | None], form: str = "test") -> list[SimEffect]:
+def make_effects(spec: Mapping[str, float | None], form: str = "test") -> list[SimEffect]:
     """Effects from {name: magnitude or None for the default}; ``form`` "test" takes each
     effect's simple form, "bench" its other one (see ``SimEffect.forms``)."""
     unknown = [n for n in spec if n not in SIM_EFFECTS]
