@@ -26,7 +26,7 @@ from shoveld.kinematics import DEFAULT_POLYORDER, DEFAULT_WINDOW_S, causal
 from shoveld.kinematics.fixed_lag import FixedLagSavgol
 from shoveld.kinematics.offline import offline_kinematics
 from shoveld.sim.plant import derivative
-from shoveld.sim.scenario import simulate_calibration, simulate_cycles
+from shoveld.sim.scenario import CHUNK_PASSES, simulate_calibration, simulate_cycles
 
 
 def lag_s(est: np.ndarray, true: np.ndarray, dt: float, max_lag: int = 25) -> float:
@@ -46,8 +46,14 @@ def main() -> None:
     args = ap.parse_args()
     params = Calibrator().fit([simulate_calibration(0, seed=1).table,
                                simulate_calibration(8420, seed=2).table]).params_
-    res = simulate_cycles(args.passes, seed=args.seed, payload_range=(3000, 35000))
+    assert params is not None  # fit sets it
+    # One segment however many passes: the true motion compared with is kept only for a
+    # run simulated in one (over CHUNK_PASSES passes the default is several, no motion).
+    res = simulate_cycles(args.passes, seed=args.seed, payload_range=(3000, 35000),
+                          chunk_passes=max(args.passes, CHUNK_PASSES))
     m = res.motion
+    assert m is not None and res.ctx is not None  # one segment: kept
+    assert m.phase is not None  # Motion.__post_init__ sets it
     dtf = m.t[1] - m.t[0]
     idx = res.ctx["sample_index"]
     true_thd = derivative(m.th, dtf)[idx]
@@ -89,9 +95,9 @@ def main() -> None:
     loop.HANDLE = original
     ests = estimate_table(table, params, EngineConfig(payload_rates="fixed_lag")).passes
     err = np.array([p.payload_kg for p in ests]) - truth
-    f = FixedLagSavgol(DEFAULT_WINDOW_S, dt, 1, DEFAULT_POLYORDER)
-    fl = [f.push(t, (math.radians(h),), t) for t, h in zip(table.time, table["handle_deg"],
-                                                               strict=True)]
+    fixed: FixedLagSavgol[float] = FixedLagSavgol(DEFAULT_WINDOW_S, dt, 1, DEFAULT_POLYORDER)
+    fl = [fixed.push(t, (math.radians(h),), t) for t, h in zip(table.time, table["handle_deg"],
+                                                                   strict=True)]
     t_c = np.array([o[0] for o in fl if o is not None])
     k = np.array([o[1][:, 0] for o in fl if o is not None])
     j = np.searchsorted(table.time, t_c)
