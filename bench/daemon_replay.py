@@ -62,6 +62,7 @@ def run_once(stepped: bool, breakdown: bool, subscriber: bool = False, bulk: boo
              ) -> dict[str, Any]:
     from shoveld.daemon.config import parse_config
     from shoveld.model.params import load_params
+    from shoveld.replay.bulk import BulkAssembler
     from shoveld.replay.service import fast_replay_service, replay_service
 
     port = free_port()
@@ -91,20 +92,29 @@ def run_once(stepped: bool, breakdown: bool, subscriber: bool = False, bulk: boo
                     "shovel/bench/**", lambda s: received.__setitem__(0, received[0] + 1))
                 time.sleep(0.5)  # the subscription reaches the daemon
             if breakdown and not stepped:
+                # Timing wrappers shadow the methods on these instances (method-assign).
                 assert svc.engine is not None
-                svc.engine.step = timed(acc, "engine", svc.engine.step)
-                svc.publisher.put = timed(acc, "zenoh put", svc.publisher.put)
+                svc.engine.step = timed(  # type: ignore[method-assign]
+                    acc, "engine", svc.engine.step)
+                svc.publisher.put = timed(  # type: ignore[method-assign]
+                    acc, "zenoh put", svc.publisher.put)
                 if bulk:
-                    feed = svc.assembler.feed  # type: ignore[attr-defined]
-                    feed._run_device = timed_by_device(acc, feed._run_device)
-                    feed._assemble = timed(acc, "  assembly (numpy)", feed._assemble)
-                    feed.spans = timed_spans(acc, "front end (drivers, assembly)", feed.spans)
-                    svc.assembler._spans = feed.spans()  # type: ignore[attr-defined]
+                    assert isinstance(svc.assembler, BulkAssembler)
+                    feed = svc.assembler.feed
+                    feed._run_device = timed_by_device(  # type: ignore[method-assign]
+                        acc, feed._run_device)
+                    feed._assemble = timed(  # type: ignore[method-assign]
+                        acc, "  assembly (numpy)", feed._assemble)
+                    feed.spans = timed_spans(  # type: ignore[method-assign]
+                        acc, "front end (drivers, assembly)", feed.spans)
+                    svc.assembler._spans = feed.spans()
                 else:
                     for dev in rr.session._devs:
                         dev.step = timed(acc, f"  driver {dev.name}", dev.step)
+                    assert svc.before_tick is not None  # the per-tick replay's drivers' step
                     svc.before_tick = timed(acc, "drivers (parse, health)", svc.before_tick)
-                    svc.assembler.sample = timed(acc, "assemble", svc.assembler.sample)
+                    svc.assembler.sample = timed(  # type: ignore[method-assign]
+                        acc, "assemble", svc.assembler.sample)
             fig = rr.run(threading.Event())
             svc.flush()
         finally:

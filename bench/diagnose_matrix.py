@@ -104,8 +104,8 @@ def one(job: dict[str, Any]) -> dict[str, Any]:
     d = diagnose(calib, measured, cfg=SelectionConfig(**job.get("select", {})),
                  engine=False, cache=cache)
     if path:
-        with open(path, "wb") as f:
-            pickle.dump(d.selection.evaluations, f)
+        with open(path, "wb") as out:
+            pickle.dump(d.selection.evaluations, out)
     t2 = time.perf_counter()
     b = d.payload("base")
     x = d.payload("extended")
@@ -356,12 +356,12 @@ def main() -> None:
         if not row:
             continue
         b = np.array([r["base_rms"] for r in row])
-        e = np.array([r["ext_rms"] for r in row])
+        ext = np.array([r["ext_rms"] for r in row])
         cut = sum(1 for r in row if r["ext_rms"] < r["base_rms"])
         halved = sum(1 for r in row if r["ext_rms"] <= max(0.5 * r["base_rms"],
                                                              1.5 * r["crb"]))
         print(f"  {t:<{w}s} {b.mean():6.0f} kg ({100 * b.mean() / RATED:.2f} %) -> "
-              f"{e.mean():6.0f} kg ({100 * e.mean() / RATED:.2f} %)   cut in {cut}/{len(row)},"
+              f"{ext.mean():6.0f} kg ({100 * ext.mean() / RATED:.2f} %)   cut in {cut}/{len(row)},"
               f" halved in {halved}/{len(row)}")
     diag = np.array([r["diag_s"] for r in results if "diag_s" in r])
     print(f"\n{len(results)} cases in {wall:.0f} s wall ({args.jobs} workers); diagnosis of a "

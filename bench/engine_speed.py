@@ -54,6 +54,7 @@ def main() -> None:
         calib_rows = sum(len(t) for t in tables)
         t_cal = timed(lambda: Calibrator().fit(tables), args.repeat)
         params = Calibrator().fit(tables).params_
+        assert params is not None  # fit sets it
         t_est = timed(lambda: estimate_table(cyc.table, params), args.repeat)
     data_h_cyc = cyc.table.time[-1] / 3600
     data_h_cal = sum(t.time[-1] for t in tables) / 3600

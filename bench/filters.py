@@ -14,11 +14,12 @@ import statistics
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 
 import numpy as np
 
 
-def per_call(fn, n: int, repeat: int) -> float:  # type: ignore[no-untyped-def]
+def per_call(fn: Callable[[], object], n: int, repeat: int) -> float:
     """Median over ``repeat`` runs of the time per call, in microseconds."""
     out = []
     for _ in range(repeat):

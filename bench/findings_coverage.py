@@ -58,7 +58,11 @@ def truths(name: str, magnitude: float, machine: Any, params: Any) -> dict[str, 
     """The reported values' true ones, by the start of their wording (``machine``: the
     simulated :class:`~shoveld.sim.machine.Machine`, ``params`` the fit, for values in
     the units of its K_H: the pull per measured ampere at its nominal field)."""
-    from shoveld.sim.effects import make_effects
+    from shoveld.sim.effects import (
+        LoadDependentFrictionEffect,
+        PayloadCogOffsetEffect,
+        make_effects,
+    )
 
     if name == "hoist_rope_mass":
         return {"hoist rope mass": magnitude}
@@ -66,6 +70,7 @@ def truths(name: str, magnitude: float, machine: Any, params: Any) -> dict[str, 
         return {"boom tilt per degree": 1.0}
     if name == "payload_cog_offset":
         (e,) = make_effects({name: magnitude}, form="bench")
+        assert isinstance(e, PayloadCogOffsetEffect)
         heap = np.array(e._heap())  # (share, along the handle, across it, up positive)
         return {"load centre of gravity in front": float(heap[:, 0] @ heap[:, 1]),
                 "load centre of gravity below": float(-(heap[:, 0] @ heap[:, 2]))}
@@ -73,6 +78,7 @@ def truths(name: str, magnitude: float, machine: Any, params: Any) -> dict[str, 
         return {"swing axis to shipper shaft": magnitude}
     if name == "load_dependent_friction":
         (e,) = make_effects({name: magnitude}, form="bench")
+        assert isinstance(e, LoadDependentFrictionEffect)
         return {"shipper-shaft friction per tonne": 1000.0 * magnitude * e.shaft_radius_m * 9.81}
     if name == "boom_suspension_spring":
         from shoveld.model.effects import BoomSuspensionSpring

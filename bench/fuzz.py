@@ -40,7 +40,7 @@ import random
 import sys
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
@@ -258,7 +258,9 @@ def fuzz_ar4000(n: int, rng: random.Random, t: Tally,
         {} if max_speed_mps is None else {"max_speed_mps": max_speed_mps}))
     drv = Ar4000Driver("laser", cfg)
     lines = [x + b"\n" for x in rx_bytes("laser.serial.jsonl").split(b"\n")[1:-1]]
-    value = [parse_line(x.rstrip(b"\r\n"), cfg.unit_m) for x in lines]
+    parsed = [parse_line(x.rstrip(b"\r\n"), cfg.unit_m) for x in lines]
+    value = [v for v in parsed if v is not None]
+    assert len(value) == len(parsed), "every clean line of the committed capture parses"
     got: list[Reading] = []
     dt = cfg.interval_s
     for _ in range(n):
@@ -381,10 +383,11 @@ def fuzz_text(n: int, rng: random.Random, t: Tally, kind: str) -> None:
                 data = mutate(rng, b"".join(lines[:1] + lines[a:a + 12]), 5)
                 path.write_bytes(data)
 
-                def one(reader: Callable[[Path], Any] = reader, path: Path = path) -> None:
+                def read_all(reader: Callable[[Path], Iterable[object]] = reader,
+                             path: Path = path) -> None:
                     for _ in reader(path):
                         pass
-                t.run(one, (CaptureFormatError,))
+                t.run(read_all, (CaptureFormatError,))
 
 
 def fuzz_modbus(n: int, rng: random.Random, t: Tally) -> None:

@@ -40,6 +40,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable
+from typing import TypedDict
 
 from hil_fixtures.net import free_port
 
@@ -205,6 +206,13 @@ def one_run(shape: str, seconds: float, puts: int = 0) -> tuple[float, float]:
             os.close(fd)
 
 
+class ShapeRuns(TypedDict):
+    """One shape's figures, run by run."""
+
+    cpu_pct: list[float]
+    wakes_per_s: list[int]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=20.0)
@@ -219,8 +227,9 @@ def main() -> None:
     for _ in range(args.runs):
         for shape in got:
             got[shape].append(one_run(shape, args.seconds, args.puts))
-    out = {shape: {"cpu_pct": [round(c, 2) for c, _ in v],
-                   "wakes_per_s": [round(w) for _, w in v]} for shape, v in got.items()}
+    out: dict[str, ShapeRuns] = {
+        shape: {"cpu_pct": [round(c, 2) for c, _ in v], "wakes_per_s": [round(w) for _, w in v]}
+        for shape, v in got.items()}
     if args.json:
         print(json.dumps(out))
         return

@@ -47,6 +47,7 @@ import statistics
 import tempfile
 import threading
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -92,9 +93,10 @@ def stray_capture(dst: Path, rate: float, seed: int, rule: bool,
         whole = b"".join(bytes.fromhex(r["hex"]) for r in line)
         t = line[0]["t"]
         block = next((off for a, b, off in blocks or () if a <= t < b), None)
-        texts, changed = [], False  # a chunk may end more than one line
-        for text in whole.split(b"\n")[:-1]:
-            digits = text.strip()
+        texts: list[bytes] = []  # a chunk may end more than one line
+        changed = False
+        for raw in whole.split(b"\n")[:-1]:
+            digits = raw.strip()
             mm = None
             if lodged is not None and t >= lodged[0] and digits.isdigit():
                 if still is None and int(digits):
@@ -107,7 +109,7 @@ def stray_capture(dst: Path, rate: float, seed: int, rule: bool,
                 elif rate and rng.random() < rate:
                     mm = int(digits) + rng.choice((-1, 1)) * rng.randint(500, 3000)
             changed |= mm is not None
-            texts.append(text if mm is None else f"{max(100, mm)}\r".encode())
+            texts.append(raw if mm is None else f"{max(100, mm)}\r".encode())
         if changed:  # the whole chunk at its first byte's time
             line = [{**line[0], "hex": (b"\n".join(texts) + b"\n").hex()}]
         out.extend(json.dumps(r, separators=(",", ":")) for r in line)
@@ -224,10 +226,13 @@ def run_rates(rates: list[float], seeds: int, tmp: Path) -> None:
     """Stray lines, each line with probability ``rate``."""
     clean = dict(replay(CAPTURE)["passes"])
     print_header(clean, "rate")
+
+    def make(seed: int, rate: float, rule: bool) -> Path:
+        return stray_capture(tmp / f"r{rate}-{rule}-{seed}", rate, seed, rule)
+
     for rate in rates:
         for rule in (True, False):
-            print_row(f"{rate:6.3f}", rule, clean, seeds, lambda seed, rate=rate, rule=rule:
-                      stray_capture(tmp / f"r{rate}-{rule}-{seed}", rate, seed, rule))
+            print_row(f"{rate:6.3f}", rule, clean, seeds, partial(make, rate=rate, rule=rule))
 
 
 def run_blocks(durations: list[float], seeds: int, tmp: Path,
@@ -245,8 +250,7 @@ def run_blocks(durations: list[float], seeds: int, tmp: Path,
 
     for dur in durations:
         for rule in (True, False):
-            print_row(f"{dur:5.2f}s", rule, clean, seeds,
-                      lambda seed, dur=dur, rule=rule: make(seed, dur, rule))
+            print_row(f"{dur:5.2f}s", rule, clean, seeds, partial(make, dur=dur, rule=rule))
 
 
 def run_lodged(seeds: int, tmp: Path) -> None:
@@ -262,7 +266,7 @@ def run_lodged(seeds: int, tmp: Path) -> None:
         return stray_capture(tmp / f"l{rule}-{seed}", 0.0, seed, rule, lodged=lodged)
 
     for rule in (True, False):
-        print_row(f"{'':>6s}", rule, clean, seeds, lambda seed, rule=rule: make(seed, rule))
+        print_row(f"{'':>6s}", rule, clean, seeds, partial(make, rule=rule))
 
 
 def run_outages(gaps: list[float], seeds: int, tmp: Path) -> None:
@@ -283,7 +287,7 @@ def run_outages(gaps: list[float], seeds: int, tmp: Path) -> None:
                              blocks=[(t0, end, off)], outage=(t0, t0 + gap))
 
     for gap in gaps:
-        print_row(f"{gap:5.1f}s", True, clean, seeds, lambda seed, gap=gap: make(seed, gap))
+        print_row(f"{gap:5.1f}s", True, clean, seeds, partial(make, gap=gap))
 
 
 def main() -> None:

@@ -162,8 +162,9 @@ def run_effects(extend: bool, only: list[str]) -> None:
             doubt = 0
             for seed in (1, 2):
                 calib, ops = simulate_session({name: size}, seed, 24)
-                est = estimate_table(ops.table,
-                                     Calibrator(method="output").fit(calib).params_)
+                params = Calibrator(method="output").fit(calib).params_
+                assert params is not None  # fit sets it
+                est = estimate_table(ops.table, params)
                 every.extend(p.misfit for p in est.passes)
                 doubt += doubt_refusals([p.misfit for p in est.passes])
                 errs.extend(pass_errors(est, ops))
@@ -225,6 +226,7 @@ def run_extended(only: list[str]) -> None:
                         Model.from_names([name]), calib, [ops.table],
                         method="output")[0].params_}
                 for label, params in fits.items():
+                    assert params is not None  # fit sets it
                     est = estimate_table(held.table, params)
                     every, errs, empty = got.setdefault(label, ([], [], []))
                     every.extend(p.misfit for p in est.passes)
@@ -259,6 +261,7 @@ def run_drift(n: int) -> None:
         trials = [simulate_calibration(kg, seed + k, machine=m).table
                   for k, kg in ((1, 0.0), (2, 8420.0))]
         params = Calibrator(method="output").fit(trials).params_
+        assert params is not None  # fit sets it
         for name, change in DRIFTS.items():
             plant = replace(m.plant, **{k: getattr(m.plant, k) * f for k, f in change.items()})
             res = simulate_cycles(12, seed + 3, machine=replace(m, plant=plant),

@@ -34,6 +34,12 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # (at run time the tree measured may be an older one)
+    from shoveld.engine.loop import Event
+    from shoveld.replay.service import ReplayRun
+    from shoveld.sample import Sample
 
 ROOT = Path(__file__).resolve().parents[1]
 PARTS = {"play": ("setup", "play"), "without engine": ("record", "stubbed"),
@@ -46,65 +52,84 @@ def child(tree: Path, mode: str) -> None:
     import logging
     import threading
 
+    from shoveld.daemon.assemble import Assembler
     from shoveld.daemon.config import parse_config
     from shoveld.model.params import load_params
 
     try:
         from shoveld.replay.service import fast_replay_service
     except ImportError:  # a tree from before 2026-11-29, when replay lived in the daemon
-        from shoveld.daemon.replay import fast_replay_service  # type: ignore[no-redef]
+        from shoveld.daemon.replay import (  # type: ignore[no-redef, import-not-found]
+            fast_replay_service,
+        )
 
     logging.disable(logging.WARNING)
     cap = tree / "hil_fixtures" / "captures" / "daemon-e2e"
     params = load_params(cap / "params.toml")
 
-    def make() -> object:
+    def make() -> ReplayRun:
         cfg = parse_config({"shovel": {"id": "bench", "params": str(cap / "params.toml"),
                                        "state_dir": tempfile.mkdtemp()},
                             "zenoh": {"listen": []}, "truck": {"target_kg": 62000.0}},
                            require_devices=False)
         return fast_replay_service(cap, cfg, params)
 
+    # The engine's step is replaced on the instance below (method-assign): recording,
+    # replaying or collecting what it was given.
     rr = make()
-    svc = rr.service  # type: ignore[attr-defined]
+    svc = rr.service
     ticks = 0
     if mode in ("record", "stubbed"):  # a first play records what the engine gave
         svc.start()
-        results: list[object] = []
+        assert svc.engine is not None  # start made it
+        results: list[list[Event]] = []
         step = svc.engine.step
-        svc.engine.step = lambda s: results.append(step(s)) or results[-1]
-        rr.run(threading.Event())  # type: ignore[attr-defined]
+
+        def recording(s: Sample) -> list[Event]:
+            results.append(step(s))
+            return results[-1]
+
+        svc.engine.step = recording  # type: ignore[method-assign]
+        rr.run(threading.Event())
         svc.flush()
-        rr.close()  # type: ignore[attr-defined]
+        rr.close()
         rr = make()
-        svc = rr.service  # type: ignore[attr-defined]
+        svc = rr.service
         svc.start()
+        assert svc.engine is not None
         nxt = iter(results).__next__
-        svc.engine.step = lambda s: nxt()
+        svc.engine.step = lambda s: nxt()  # type: ignore[method-assign]
         if mode == "stubbed":
-            ticks = rr.run(threading.Event())["ticks"]  # type: ignore[attr-defined]
+            ticks = rr.run(threading.Event())["ticks"]
     elif mode in ("samples", "steps", "noblocks"):  # a first play gives the samples
         from shoveld.engine.loop import Engine
 
         svc.start()
-        got: list[object] = []
+        assert svc.engine is not None
+        got: list[Sample] = []
         step = svc.engine.step
-        svc.engine.step = lambda s: got.append(s) or step(s)
-        rr.run(threading.Event())  # type: ignore[attr-defined]
+
+        def collecting(s: Sample) -> list[Event]:
+            got.append(s)
+            return step(s)
+
+        svc.engine.step = collecting  # type: ignore[method-assign]
+        rr.run(threading.Event())
         svc.flush()
         engine = Engine(svc.engine.params, svc.engine.cfg)
         if mode == "noblocks":
             engine._flush = engine.batch.clear  # type: ignore[method-assign]
         if mode != "samples":
             for s in got:
-                engine.step(s)  # type: ignore[arg-type]
+                engine.step(s)
             ticks = len(got)
     elif mode == "front":
+        assert not isinstance(svc.assembler, Assembler)  # the bulk one, fast's default
         ticks = sum(len(span.samples) for span in svc.assembler.feed.spans())
     elif mode != "build":
         svc.start()
         if mode == "play":
-            ticks = rr.run(threading.Event())["ticks"]  # type: ignore[attr-defined]
+            ticks = rr.run(threading.Event())["ticks"]
     svc.flush()
     print(f"ticks {ticks}")
     sys.stdout.flush()
