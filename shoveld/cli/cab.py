@@ -127,6 +127,16 @@ def _doubt(p: dict[str, Any]) -> str:
         "  ? model did not fit"
 
 
+def _or_dash(v: Any) -> str:
+    """A value the screen shows, or "-" where the message left it out."""
+    return "-" if v is None else str(v)
+
+
+def _kg_or_dash(kg: float | None) -> str:
+    """Kilograms to the kilogram, or "-" where the message left them out (never 0)."""
+    return "-" if kg is None else f"{kg:.0f}"
+
+
 def _live_doubt(live: dict[str, Any]) -> str:
     """A live estimate made while the crowd is in doubt (the daemon's ``crowd_doubt``:
     its laser's gap or change of target) says so beside its number ("" otherwise)."""
@@ -229,7 +239,7 @@ class CabState:
                                                              or time.time()))
             if topic == "payload/live":
                 v.live = msg
-                ph = msg.get("phase", "?")
+                ph = msg.get("phase") or "?"
                 if self._last_phase.get(shovel) != ph:
                     self._last_phase[shovel] = ph
                     w = _weight(msg)
@@ -321,10 +331,12 @@ class CabState:
                            + "=" * max(0, width - len(name) - 4 - (0 if v.alive else 18)))
                 lv = v.live or {}
                 if lv.get("valid") and lv.get("payload_kg") is not None:
-                    val = f"{lv['payload_kg']:8.0f} kg  +- {lv['std_kg']:.0f} kg{_live_doubt(lv)}"
+                    sd = lv.get("std_kg")  # its spread left out if not sent, as _weight does
+                    val = (f"{lv['payload_kg']:8.0f} kg"
+                           + (f"  +- {sd:.0f} kg" if sd is not None else "") + _live_doubt(lv))
                 else:
                     val = "      -- (no valid estimate)"
-                out.append(f"  phase {lv.get('phase', '?'):7s}  live payload {val}")
+                out.append(f"  phase {lv.get('phase') or '?':7s}  live payload {val}")
                 t = dict(v.truck or {})
                 if v.closed and t and v.closed[-1].get("truck") == t.get("truck"):
                     t = dict(v.closed[-1])
@@ -368,22 +380,24 @@ class CabState:
                 if v.closed:
                     c = v.closed[-1]
                     cw = int(c.get("invalid_passes") or 0)
-                    out.append(f"  last truck {c['truck']}: "
-                               + (f"at least {c['total_kg']:.0f} kg ({c['fill_pct']} %), "
-                                  f"{cw} not weighed" if cw else
-                                  f"{c['total_kg']:.0f} kg ({c['fill_pct']} %) {c['status']}"))
+                    kg, pct = _kg_or_dash(c.get("total_kg")), _or_dash(c.get("fill_pct"))
+                    out.append(f"  last truck {_or_dash(c.get('truck'))}: "
+                               + (f"at least {kg} kg ({pct} %), {cw} not weighed" if cw
+                                  else f"{kg} kg ({pct} %) {c.get('status') or ''}"))
+                    # (their fields' kinds are checked on arrival; a field may be absent)
                     r = c.get("rule_10_10_20") or {}
                     sh = c.get("shift") or {}
                     if sh.get("trucks"):
+                        t_kg = "-" if sh.get("kg") is None else f"{sh['kg'] / 1000:.1f}"
                         out.append(f"  shift so far: {n_of(sh['trucks'], 'truck', 'trucks')}, "
-                                   f"{n_of(sh['passes'], 'pass', 'passes')}, "
-                                   f"{sh['kg'] / 1000:.1f} t")
+                                   f"{n_of(sh.get('passes') or 0, 'pass', 'passes')}, {t_kg} t")
                     if r.get("trucks"):
                         nj = int(r.get("not_judged") or 0)
                         out.append(f"  shift: {n_of(r['trucks'], 'truck', 'trucks')}, "
-                                   f"mean fill {r['mean_pct']} %, "
-                                   f"{r['over_110_pct']} % over 110 %, {r['over_120']} over "
-                                   f"120 % ({'no overload beyond' if r['compliant'] else 'OUTSIDE'}"
+                                   f"mean fill {_or_dash(r.get('mean_pct'))} %, "
+                                   f"{_or_dash(r.get('over_110_pct'))} % over 110 %, "
+                                   f"{r.get('over_120') or 0} over 120 % "
+                                   f"({'no overload beyond' if r.get('compliant') else 'OUTSIDE'}"
                                    " the 10/10/20 rule)"
                                    + (f"; {nj} with a pass not weighed not judged" if nj else ""))
                     elif r.get("not_judged"):

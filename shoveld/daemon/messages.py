@@ -28,7 +28,31 @@ day short of its end, for any time zone); ``shoveld passes`` and ``report`` take
 COUNTS = frozenset({"pass", "truck", "passes", "invalid_passes", "samples"})
 """Whole numbers, 0 or more."""
 FLAGS = frozenset({"valid", "closed", "misfit_high"})
-TEXTS = frozenset({"reason", "status", "phase"})
+TEXTS = frozenset({"reason", "status", "phase", "crowd_doubt"})
+PARTS: dict[str, dict[str, str]] = {
+    "shift": {"window_h": "number", "trucks": "count", "passes": "count", "kg": "number",
+              "not_weighed": "count", "misfit_high": "count"},
+    "rule_10_10_20": {"window_h": "number", "trucks": "count", "not_judged": "count",
+                      "over_120": "count", "mean_kg": "number", "target_kg": "number",
+                      "mean_pct": "number", "over_110_pct": "number", "compliant": "flag"},
+}
+"""A truck message's objects the screens read (the shift so far, the 10/10/20 rule),
+with their fields' kinds: until 2026-12-02 they went unchecked, and a shift's ``kg`` as
+text ended the terminal cab's screen in a traceback. (In ``shift``, ``misfit_high`` is
+a count of trucks, not a pass's flag.)"""
+_WANT = {"number": "a finite number", "count": "a whole number, 0 or more",
+         "flag": "true or false"}
+
+
+def _is(kind: str, v: Any) -> bool:
+    """Whether ``v`` (not None) is of ``kind``: a finite number, a count or a flag."""
+    if kind == "flag":
+        return isinstance(v, bool)
+    if isinstance(v, bool):
+        return False
+    if kind == "count":
+        return isinstance(v, int) and v >= 0
+    return isinstance(v, int | float) and math.isfinite(v)
 
 
 def _kind_ok(key: str, v: Any) -> str | None:
@@ -37,16 +61,16 @@ def _kind_ok(key: str, v: Any) -> str | None:
     if v is None:
         return None
     if key in NUMBERS:
-        if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-            return "a finite number"
+        if not _is("number", v):
+            return _WANT["number"]
         if key in TIMES and not 0.0 <= v <= LATEST:
             return "a time from 1970 to 9999 (Unix seconds)"
     elif key in COUNTS:
-        if isinstance(v, bool) or not isinstance(v, int) or v < 0:
-            return "a whole number, 0 or more"
+        if not _is("count", v):
+            return _WANT["count"]
     elif key in FLAGS:
-        if not isinstance(v, bool):
-            return "true or false"
+        if not _is("flag", v):
+            return _WANT["flag"]
     elif key in TEXTS:
         if not isinstance(v, str):
             return "a text"
@@ -62,12 +86,24 @@ def message_problem(msg: Any) -> str | None:
     if not isinstance(msg, dict):
         return f"a JSON {type(msg).__name__} where an object was expected"
     for k, v in msg.items():
+        if k in PARTS and v is not None:
+            if not isinstance(v, dict):
+                return f"key {k!r} is {_short(v)}, not an object"
+            kinds = PARTS[k]
+            for f, x in v.items():
+                if f in kinds and x is not None and not _is(kinds[f], x):
+                    return f"key '{k}.{f}' is {_short(x)}, not {_WANT[kinds[f]]}"
+            continue
         expected = _kind_ok(k, v)
         if expected is not None:
-            text = repr(v)
-            return f"key {k!r} is {text if len(text) <= 40 else text[:37] + '...'}, not " \
-                   f"{expected}"
+            return f"key {k!r} is {_short(v)}, not {expected}"
     return None
+
+
+def _short(v: Any) -> str:
+    """``v`` as Python writes it, in 40 characters at most."""
+    text = repr(v)
+    return text if len(text) <= 40 else text[:37] + "..."
 
 
 def status_problem(st: Any) -> str | None:

@@ -6,7 +6,9 @@ import io
 import subprocess
 import sys
 import threading
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 from shoveld.cli.cab import CabState, show
 from shoveld.model.params import ModelParams
@@ -197,6 +199,48 @@ def test_cab_cli_on_zenoh(tmp_path: Path, e2e_table: SignalsTable, params: Model
     assert " lift " in out and " swing " in out  # live payload lines at phase changes
 
 
+def test_the_daemons_own_messages_are_what_the_screens_take(
+        tmp_path: Path, e2e_table: SignalsTable, params: ModelParams) -> None:
+    """Every message the daemon sends on a replay (passes, trucks with their shift and
+    10/10/20 objects, live estimates, health, joints) and its status answer pass the
+    screens' check: the check refuses other versions' shapes, never the daemon's own."""
+    import json
+    from collections.abc import Callable
+
+    from shoveld.daemon.messages import message_problem, status_problem
+
+    svc, feed = table_service(e2e_table, make_cfg(tmp_path), params, close_truck_at_end=True)
+    sent: list[tuple[str, Any]] = []
+    put, put_text = svc.publisher.put, svc.publisher.put_text
+
+    def keep(topic: str, obj: dict[str, Any] | str | None) -> bool:
+        if isinstance(obj, dict):  # (text comes from put_text, kept there)
+            sent.append((topic, obj))
+        return put(topic, obj)
+
+    def keep_text(topic: str, make: Callable[[], str | None]) -> bool:
+        text = make()  # made whether or not anyone listens, to be checked
+        if text is not None:
+            sent.append((topic, json.loads(text)))
+        return put_text(topic, lambda: text)
+
+    svc.publisher.put = keep  # type: ignore[method-assign]  # every message kept
+    svc.publisher.put_text = keep_text  # type: ignore[method-assign]
+    svc.start()
+    try:
+        svc.run(threading.Event(), done=lambda: feed.finished)
+        svc.flush()
+        status = svc.status()
+    finally:
+        svc.close()
+    topics = {t for t, _ in sent}
+    assert {"pass", "truck", "payload/live", "health", "joints"} <= topics, topics
+    trucks = [m for t, m in sent if t == "truck"]
+    assert any("shift" in m and "rule_10_10_20" in m for m in trucks)  # the objects checked
+    assert [(t, message_problem(m)) for t, m in sent if message_problem(m) is not None] == []
+    assert status_problem(status) is None
+
+
 def test_a_late_status_answer_keeps_newer_passes_of_its_truck() -> None:
     """The catch-up ``status`` answer may be older than a pass heard meanwhile."""
     state = CabState()
@@ -300,3 +344,103 @@ def test_the_shapes_the_screens_take() -> None:
         "its live estimate: key 'valid' is 'yes', not true or false")
     assert status_problem({**st, "problems": "none"}) == ("key 'problems' is not a list of "
                                                           "texts")
+    # a truck's shift and 10/10/20 objects, field by field (unchecked until 2026-12-02:
+    # a shift's kg as text ended the terminal cab's screen in a traceback)
+    truck = {**TRUCK, "closed": True}
+    assert message_problem(truck) is None
+    assert message_problem({**truck, "shift": {**TRUCK["shift"], "kg": "lots"}}) == (
+        "key 'shift.kg' is 'lots', not a finite number")
+    assert message_problem({**truck, "shift": {**TRUCK["shift"], "misfit_high": True}}) == (
+        "key 'shift.misfit_high' is True, not a whole number, 0 or more")  # a count there
+    assert message_problem({**truck, "rule_10_10_20": {**TRUCK["rule_10_10_20"],
+                                                       "trucks": "1"}}) == (
+        "key 'rule_10_10_20.trucks' is '1', not a whole number, 0 or more")
+    assert message_problem({**truck, "rule_10_10_20": {**TRUCK["rule_10_10_20"],
+                                                       "compliant": 1}}) == (
+        "key 'rule_10_10_20.compliant' is 1, not true or false")
+    assert message_problem({**truck, "shift": [1, 2]}) == "key 'shift' is [1, 2], not an object"
+    assert message_problem({**truck, "shift": {"extra": "x", "kg": None}}) is None
+    assert message_problem({**LIVE, "crowd_doubt": 5}) == "key 'crowd_doubt' is 5, not a text"
+
+
+PASS: dict[str, Any] = {
+    "pass": 3, "truck": 1, "payload_kg": 31027.4, "std_kg": 91.1, "valid": True, "reason": "",
+    "start": 1795318880.0, "end": 1795318899.5, "samples": 600, "misfit": 0.8,
+    "misfit_high": False}
+LIVE: dict[str, Any] = {
+    "time": 1795318890.0, "phase": "lift", "pass": 3, "payload_kg": 30000.0, "std_kg": 120.0,
+    "valid": True, "crowd_doubt": "had no reading for 1.0 s"}
+TRUCK: dict[str, Any] = {
+    "truck": 1, "passes": 4, "total_kg": 120000.0, "std_kg": 180.0, "target_kg": 136000.0,
+    "fill_pct": 88.2, "status": "under", "invalid_passes": 1, "closed": False,
+    "shift": {"window_h": 8, "trucks": 1, "passes": 4, "kg": 120000.0, "not_weighed": 0,
+              "misfit_high": 0},
+    "rule_10_10_20": {"window_h": 8, "trucks": 1, "not_judged": 1, "over_120": 0,
+                      "mean_kg": 120000.0, "target_kg": 136000.0, "mean_pct": 88.2,
+                      "over_110_pct": 0.0, "compliant": True}}
+"""A pass, a live estimate and a truck as the daemon sends them (every field the screens
+read)."""
+
+
+def _left_out(msg: dict[str, Any]) -> Iterator[tuple[str, dict[str, Any]]]:
+    """``msg`` with each field (and each field of its objects) null, then absent."""
+    for k, v in msg.items():
+        for null in (True, False):
+            m = {**msg, k: None} if null else {x: y for x, y in msg.items() if x != k}
+            yield f"{k} {'null' if null else 'absent'}", m
+        if isinstance(v, dict):
+            for f in v:
+                for null in (True, False):
+                    part = {**v, f: None} if null else {x: y for x, y in v.items() if x != f}
+                    yield f"{k}.{f} {'null' if null else 'absent'}", {**msg, k: part}
+
+
+def test_a_field_left_out_or_null_is_shown_as_missing_not_a_traceback() -> None:
+    """The screens take a message whose field is null or absent (another version of the
+    daemon; the daemon writes a value it has not as null): until 2026-12-02 a closed
+    truck without its total, status or fill, its shift without its kg, its 10/10/20
+    without its mean, a live estimate without its spread or phase ended the terminal
+    cab's screen (or the web state's) in a traceback: 58 of the 480 screens built here."""
+    from shoveld.daemon.messages import message_problem, status_problem
+    from shoveld.web.state import ScreenState
+
+    cases = [("pass", PASS), ("payload/live", LIVE), ("truck", TRUCK),
+             ("truck", {**TRUCK, "closed": True}),
+             ("truck", {**TRUCK, "closed": True, "invalid_passes": 0}),
+             ("health", {"time": 1795318890.0, "problems": ["mti: silent"]})]
+    tried = 0
+    for topic, msg in cases:
+        for name, m in _left_out(msg):
+            assert message_problem(m) is None, name  # taken: nothing of another kind
+            for kind in (CabState, ScreenState):
+                state = kind()
+                for t, good in (("payload/live", LIVE), ("truck", TRUCK), ("pass", PASS)):
+                    state.on_message("x", t, good)
+                state.on_message("x", topic, m)
+                assert "== x " in state.screen(), (topic, name)
+                if isinstance(state, ScreenState):
+                    assert state.snapshot()["shovels"][0]["shovel"] == "x"
+                tried += 1
+    status = {"truck": TRUCK, "truck_passes": [PASS], "live": LIVE, "problems": []}
+    for name, m in _left_out(status):
+        assert status_problem(m) is None, name
+        for kind in (CabState, ScreenState):
+            state = kind()
+            state.on_status("x", m)
+            assert "== x " in state.screen(), ("status", name)
+            tried += 1
+    assert tried > 400  # every field of every message, on both screens
+    # what is missing is said as missing: no spread, no number for it
+    state = CabState()
+    state.on_message("x", "payload/live", {**LIVE, "std_kg": None, "crowd_doubt": None})
+    state.on_message("x", "truck", {**TRUCK, "closed": True, "invalid_passes": 0,
+                                    "fill_pct": None, "rule_10_10_20": {"trucks": 1}})
+    screen = state.screen()
+    assert "live payload    30000 kg\n" in screen, screen
+    assert "last truck 1: 120000 kg (- %) under" in screen, screen
+    assert "shift: 1 truck, mean fill - %, - % over 110 %, 0 over 120 %" in screen, screen
+    state.on_message("x", "truck", {**TRUCK, "closed": True, "total_kg": None,
+                                    "shift": {"trucks": 2, "passes": 7, "kg": None}})
+    screen = state.screen()
+    assert "last truck 1: at least - kg (88.2 %), 1 not weighed" in screen, screen
+    assert "shift so far: 2 trucks, 7 passes, - t" in screen, screen

@@ -38,7 +38,7 @@ function render(snap) {
     // the pass is weighed at the dump only if it fits the machine
     p.textContent = (s.payload_kg / 1000).toFixed(1) + " t";
     p.className = s.crowd_doubt ? "doubtful" : "";
-    $("payload-std").textContent = "± " + (s.std_kg / 1000).toFixed(1) + " t";
+    $("payload-std").textContent = s.std_kg == null ? "" : "± " + screen.t(s.std_kg);
     d.textContent = s.crowd_doubt ? `? crowd laser ${s.crowd_doubt}: checked at the dump` : "";
     d.title = d.textContent;
   } else {
@@ -71,11 +71,11 @@ function render(snap) {
       return `<tr class="invalid-pass" data-pass="${q.pass}"><td>${i + 1}</td><td colspan="2" class="reason${whole ? " whole" : ""}" title="${screen.esc(q.reason)}">not weighed: ${screen.esc(screen.clipped(q.reason || "", whole, 1))}</td></tr>`;
     }
     const doubt = q.misfit_high ? " ?" : "";
-    return `<tr${doubt ? ' class="doubtful-pass"' : ""}><td>${i + 1}</td><td>${(q.payload_kg / 1000).toFixed(1)}${doubt}</td><td>${(q.std_kg / 1000).toFixed(1)}</td></tr>`;
+    return `<tr${doubt ? ' class="doubtful-pass"' : ""}><td>${i + 1}</td><td>${screen.tonnes(q.payload_kg)}${doubt}</td><td>${screen.tonnes(q.std_kg)}</td></tr>`;
   }).join("");
   $("doubt").textContent = s.doubt || "";
   $("trucks").innerHTML = s.closed.map(c =>
-    `<tr><td>${c.truck}</td><td>${c.passes}</td><td>${c.invalid_passes ? "≥ " : ""}${(c.total_kg / 1000).toFixed(1)}</td><td>${c.fill_pct} %</td>${statusCell(c)}</tr>`).join("");
+    `<tr><td>${c.truck}</td><td>${c.passes}</td><td>${c.invalid_passes ? "≥ " : ""}${screen.tonnes(c.total_kg)}</td><td>${c.fill_pct ?? "-"} %</td>${statusCell(c)}</tr>`).join("");
   $("shift").textContent = ruleLine(s.rule);
   drawArm(s.joints);
   screen.fitProblems(probs, showProblems, screen.tapped());
@@ -98,7 +98,7 @@ function ruleLine(r) {
   if (!all) return "no truck closed yet";
   const verdict = r.compliant ? "within the 10/10/20 rule" : "OUTSIDE the 10/10/20 rule";
   if (!r.trucks) return `no truck judged of ${all}: a pass of each not weighed` + (r.over_120 ? `; ${r.over_120} over 120 % — ${verdict}` : "");
-  return `${r.not_judged ? r.trucks + " of " + all + " trucks" : screen.n(r.trucks, "truck", "trucks")}, mean ${r.mean_pct} % of target, ${r.over_110_pct} % over 110 %, ${r.over_120} over 120 % — ${verdict}`;
+  return `${r.not_judged ? r.trucks + " of " + all + " trucks" : screen.n(r.trucks, "truck", "trucks")}, mean ${r.mean_pct ?? "-"} % of target, ${r.over_110_pct ?? "-"} % over 110 %, ${r.over_120 ?? 0} over 120 % — ${verdict}`;
 }
 
 function showProblems(probs, whole) {

@@ -4,7 +4,9 @@ const screen = {
   snapshot: null,
   socketUp: false,
   shown: {},            // pass number -> Date.now() when it first appeared (latency bench)
-  t(kg, digits = 1) { return kg === null || kg === undefined ? "-" : (kg / 1000).toFixed(digits) + " t"; },
+  // Tonnes from kilograms, "-" where the message left the value out (null), never "0.0".
+  tonnes(kg, digits = 1) { return kg === null || kg === undefined ? "-" : (kg / 1000).toFixed(digits); },
+  t(kg, digits = 1) { const x = screen.tonnes(kg, digits); return x === "-" ? x : x + " t"; },
   // A count with its noun as a person writes it, "1 pass" / "2 passes" (as shoveld/words.py).
   n(k, one, many) { return `${k} ${k === 1 ? one : many}`; },
   // A truck's load: its weighed total, "≥" before it when a pass of it was not weighed

@@ -4,7 +4,7 @@ function card(s, whole) {
   const tr = s.truck || {};
   const state = s.silent ? `<span class="silent-tag">SILENT${s.age_s != null ? " for " + s.age_s.toFixed(0) + " s" : ""}</span>`
     : `<span class="state">${screen.esc((s.phase || "idle").toUpperCase())}</span>`;
-  const live = s.valid ? screen.t(s.payload_kg) + " ± " + screen.t(s.std_kg) : "no valid estimate";
+  const live = s.valid ? screen.t(s.payload_kg) + (s.std_kg == null ? "" : " ± " + screen.t(s.std_kg)) : "no valid estimate";
   const doubt = s.crowd_doubt ? ` <span class="doubtful" title="the crowd laser ${screen.esc(s.crowd_doubt)}">? crowd laser in doubt</span>` : "";
   return `<section class="panel card${s.silent ? " silent" : ""}" data-shovel="${screen.esc(s.shovel)}">
     <h2>${screen.esc(s.shovel)} ${state}</h2>
