@@ -14,6 +14,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+Position = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+"""A body's position in the swing plane from (th, d, boom), as ``plant.Body`` holds it."""
 SIM_EFFECTS: dict[str, type[SimEffect]] = {}
 
 
@@ -173,7 +175,8 @@ class SwingCentrifugalEffect(SimEffect):
                 continue
             delta = float(np.sqrt(b.inertia / np.mean(m)))
             for sgn in (-1.0, 1.0):
-                def pos(t_, d_, bo_, f=b.position, s=sgn * delta):
+                def pos(t_: np.ndarray, d_: np.ndarray, bo_: np.ndarray,
+                        f: Position = b.position, s: float = sgn * delta) -> np.ndarray:
                     return f(t_, d_, bo_) + s * np.stack([np.cos(t_), np.sin(t_)], axis=-1)
                 pts.append((np.asarray(m) * 0.5, pos))
         return pts
@@ -194,12 +197,12 @@ class SwingCentrifugalEffect(SimEffect):
             mass = np.asarray(mass, dtype=float)
             mass = mass[:, None] if mass.ndim else mass
 
-            def p3(t_, d_, f=pos):
+            def p3(t_: np.ndarray, d_: np.ndarray, f: Position = pos) -> np.ndarray:
                 xy = f(t_, d_, boom)
                 rad = r0 + xy[:, 0]
                 return np.stack([rad * cps, xy[:, 1], rad * sps], axis=-1)
 
-            def p2(t_, d_, f=pos):
+            def p2(t_: np.ndarray, d_: np.ndarray, f: Position = pos) -> np.ndarray:
                 return f(t_, d_, boom)
 
             for place in (p3, p2):
@@ -355,7 +358,7 @@ class HoistRopeMassEffect(SimEffect):
         for k in range(self.n_elements):
             s = (k + 0.5) / self.n_elements
 
-            def pos(t_, d_, bo_, s=s):
+            def pos(t_: np.ndarray, d_: np.ndarray, bo_: np.ndarray, s: float = s) -> np.ndarray:
                 return _sheave(bo_, pp.l_bs) + s * (_bail(t_, d_) - _sheave(bo_, pp.l_bs))
             bodies.append(Body(f"rope{k}", self.magnitude * length / self.n_elements, pos))
         q += generalized_forces(bodies, th, d, boom, dt, np.zeros(2))

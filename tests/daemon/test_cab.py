@@ -10,6 +10,8 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import pytest
+
 from shoveld.cli.cab import CabState, show
 from shoveld.model.params import ModelParams
 from shoveld.replay.table import table_service
@@ -257,7 +259,8 @@ def test_a_late_status_answer_keeps_newer_passes_of_its_truck() -> None:
     assert v.passes == [] and v.truck["truck"] == 5
 
 
-def test_a_message_of_another_shape_is_refused_and_counted(caplog) -> None:
+def test_a_message_of_another_shape_is_refused_and_counted(
+        caplog: pytest.LogCaptureFixture) -> None:
     """A pass, truck, live estimate or health whose field the screens read has another
     kind (another daemon version, a bug): until 2026-11-30 it reached the cab's
     formatting and ended in a traceback in Zenoh's callback ("Unknown format code 'f'

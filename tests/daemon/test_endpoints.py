@@ -44,7 +44,8 @@ def test_replay_refuses_a_malformed_listen_endpoint(tmp_path: Path) -> None:
     assert "--listen" in r.stderr and "HOST:PORT" in r.stderr and "Traceback" not in r.stderr
 
 
-def test_a_config_that_is_not_text_is_one_line(tmp_path: Path, capsys) -> None:
+def test_a_config_that_is_not_text_is_one_line(tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
     from shoveld.cli import main
 
     cfg = tmp_path / "shoveld.toml"

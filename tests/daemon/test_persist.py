@@ -148,7 +148,8 @@ def test_parse_when() -> None:
 
 
 @pytest.mark.parametrize("when", ["99999999999999", "0001-01-01"])
-def test_a_time_out_of_the_calendar_is_one_line(when: str, tmp_path: Path, capsys) -> None:
+def test_a_time_out_of_the_calendar_is_one_line(when: str, tmp_path: Path,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
     from shoveld.cli import main
 
     for cmd in (["passes"], ["report", "--out", str(tmp_path / "r")]):
@@ -157,8 +158,9 @@ def test_a_time_out_of_the_calendar_is_one_line(when: str, tmp_path: Path, capsy
         assert len(err) == 1 and "outside 1970-01-01" in err[0], err
 
 
-def test_commands_find_a_local_config_before_the_installed_one(tmp_path: Path, monkeypatch,
-                                                              capsys) -> None:
+def test_commands_find_a_local_config_before_the_installed_one(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+        ) -> None:
     from shoveld.cli import main
     from shoveld.paths import DEFAULT_CONFIG, find_config
 
@@ -213,7 +215,7 @@ def test_a_new_state_folder_is_owner_only_whatever_the_umask(tmp_path: Path) -> 
     assert stat.S_IMODE((tmp_path / "state").stat().st_mode) == 0o700
 
 
-def test_version(capsys) -> None:
+def test_version(capsys: pytest.CaptureFixture[str]) -> None:
     from shoveld.cli import main
 
     with pytest.raises(SystemExit) as e:
@@ -221,7 +223,7 @@ def test_version(capsys) -> None:
     assert e.value.code == 0 and capsys.readouterr().out.startswith("shoveld 0.")
 
 
-def test_help_shows_defaults(capsys) -> None:
+def test_help_shows_defaults(capsys: pytest.CaptureFixture[str]) -> None:
     from shoveld.cli import main
 
     with pytest.raises(SystemExit):

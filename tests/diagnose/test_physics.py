@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -439,7 +440,7 @@ def test_the_boom_drops_model_error_grows_with_the_reference_current() -> None:
     assert at_1000.error_of(w1000) == pytest.approx(2 * at_500.error_of(w500))
 
 
-def test_params_file_records_terms_and_hyper(tmp_path) -> None:
+def test_params_file_records_terms_and_hyper(tmp_path: Path) -> None:
     model = Model.from_names(["sensor_time_skew", "swing_centrifugal"],
                              {"sensor_time_skew": {"delay_s": 0.08},
                               "swing_centrifugal": {"R0_m": 3.7}})
@@ -461,7 +462,7 @@ def test_params_file_records_terms_and_hyper(tmp_path) -> None:
 
 
 def test_a_boom_identified_before_the_pose_keeps_its_form_and_a_bad_pose_is_refused(
-        tmp_path) -> None:
+        tmp_path: Path) -> None:
     """A params file whose boom term has no ``moment`` (written before the twentieth
     session) was identified with one drop per newton at every pose: it loads in that
     form (its columns those of ``moment = "none"``, its value worded without a pose and

@@ -60,7 +60,7 @@ def test_missing_file_is_a_one_line_error(capsys: pytest.CaptureFixture[str]) ->
     assert "cannot read /nonexistent.bin" in capsys.readouterr().err
 
 
-def test_a_file_with_no_xbus_message_is_an_error(tmp_path, capsys: pytest.CaptureFixture[str]
+def test_a_file_with_no_xbus_message_is_an_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]
                                                  ) -> None:
     """A wrong file (here a capture's JSON lines, which hold the stream as hex) or an
     empty one said "0 messages" and exited 0 (until 2026-11-30): now one line, exit 2."""

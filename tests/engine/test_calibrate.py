@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -102,7 +103,8 @@ def test_params_file_round_trip(params: ModelParams, tmp_path: Path) -> None:
     (lambda s: s.replace("[noise]", "[noize]"), "'noise'"),
     (lambda s: s + "\n[[[", "not valid TOML"),
 ])
-def test_params_file_errors_name_the_key(params: ModelParams, tmp_path: Path, edit, words) -> None:
+def test_params_file_errors_name_the_key(params: ModelParams, tmp_path: Path,
+                                         edit: Callable[[str], str], words: str) -> None:
     p = tmp_path / "params.toml"
     save_params(p, params)
     p.write_text(edit(p.read_text()))

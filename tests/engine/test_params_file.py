@@ -61,7 +61,8 @@ def test_a_missing_covariance_falls_back_to_the_standard_errors(tmp_path: Path) 
     assert got.cov[0, 0] == pytest.approx(got.stderr[0] ** 2)
 
 
-def test_estimate_with_a_bad_params_file_is_one_line(tmp_path: Path, capsys) -> None:
+def test_estimate_with_a_bad_params_file_is_one_line(tmp_path: Path,
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
     p = variant(tmp_path, first_value(GOOD.read_text()), "value = nan")
     table = tmp_path / "t.csv"
     table.write_text("# format: shovel-signals/1\n")
@@ -73,8 +74,8 @@ def test_estimate_with_a_bad_params_file_is_one_line(tmp_path: Path, capsys) -> 
 @pytest.mark.parametrize("argv", [["sim", "--passes", "1", "--out", "{d}/no/such/s.csv"],
                                   ["calibrate", "--out", "{d}/no/such/p.toml", "{d}/t.csv",
                                    "{d}/t1.csv"]])
-def test_an_output_in_a_missing_folder_is_one_line(tmp_path: Path, capsys,
-                                                   argv: list[str]) -> None:
+def test_an_output_in_a_missing_folder_is_one_line(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str]) -> None:
     from shoveld.signals.table import write_table
     from shoveld.sim.scenario import simulate_calibration
 

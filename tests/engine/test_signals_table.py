@@ -103,8 +103,8 @@ def test_a_cell_too_long_for_csv_is_a_format_error_with_its_line() -> None:
         read_table("t.csv", text)
 
 
-def test_the_fast_path_and_the_cell_by_cell_path_read_the_same_table(tmp_path: Path,
-                                                                     monkeypatch) -> None:
+def test_the_fast_path_and_the_cell_by_cell_path_read_the_same_table(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     import shoveld.signals.table as T
     from shoveld.sim.scenario import simulate_cycles
 
@@ -253,7 +253,7 @@ def test_the_fast_path_and_the_cell_by_cell_path_agree_on_any_rows(data: st.Data
 
 
 def test_blanks_at_row_ends_and_inside_rows_are_read_by_the_fast_path_itself(
-        monkeypatch) -> None:
+        monkeypatch: pytest.MonkeyPatch) -> None:
     """Blanks are null to Arrow and NaN in the table, with no second read: the fast path
     returns the rows itself (a fast path that always gave way would pass the comparisons
     above and be slow), the same table as cell by cell."""

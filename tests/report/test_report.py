@@ -95,7 +95,8 @@ def test_passes_not_weighed_are_counted_by_the_kind_of_reason(tmp_path: Path) ->
             "only N valid samples in lift and swing (N invalid): 1</p>") in page
 
 
-def test_report_of_a_period_and_of_an_empty_log(tmp_path: Path, capsys) -> None:
+def test_report_of_a_period_and_of_an_empty_log(tmp_path: Path,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
     db, made = shift(tmp_path)
     out = tmp_path / "r2"
     since = str(made[10]["end"] - 1)
@@ -110,7 +111,8 @@ def test_report_of_a_period_and_of_an_empty_log(tmp_path: Path, capsys) -> None:
     assert "none.sqlite" in capsys.readouterr().err
 
 
-def test_one_truck_and_one_pass_are_said_in_the_singular(tmp_path: Path, capsys) -> None:
+def test_one_truck_and_one_pass_are_said_in_the_singular(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """The first truck of a shift (two passes, one dump-to-dump cycle), then a period
     holding only its last pass: "1 truck", "1 cycle", "1 pass", never "1 trucks"."""
     log = PassLog(db_path(tmp_path), "s1")
