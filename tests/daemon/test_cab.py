@@ -21,6 +21,24 @@ from .conftest import free_port, make_cfg
 
 T = 1_790_000_000.0
 
+PASS: dict[str, Any] = {
+    "pass": 3, "truck": 1, "payload_kg": 31027.4, "std_kg": 91.1, "valid": True, "reason": "",
+    "start": 1795318880.0, "end": 1795318899.5, "samples": 600, "misfit": 0.8,
+    "misfit_high": False}
+LIVE: dict[str, Any] = {
+    "time": 1795318890.0, "phase": "lift", "pass": 3, "payload_kg": 30000.0, "std_kg": 120.0,
+    "valid": True, "crowd_doubt": "had no reading for 1.0 s"}
+TRUCK: dict[str, Any] = {
+    "truck": 1, "passes": 4, "total_kg": 120000.0, "std_kg": 180.0, "target_kg": 136000.0,
+    "fill_pct": 88.2, "status": "under", "invalid_passes": 1, "closed": False,
+    "shift": {"window_h": 8, "trucks": 1, "passes": 4, "kg": 120000.0, "not_weighed": 0,
+              "misfit_high": 0},
+    "rule_10_10_20": {"window_h": 8, "trucks": 1, "not_judged": 1, "over_120": 0,
+                      "mean_kg": 120000.0, "target_kg": 136000.0, "mean_pct": 88.2,
+                      "over_110_pct": 0.0, "compliant": True}}
+"""A pass, a live estimate and a truck as the daemon sends them (every field the screens
+read)."""
+
 
 def fill(state: CabState) -> None:
     state.on_status("s7", {"truck": {"truck": 4, "passes": 1, "total_kg": 30000.0,
@@ -364,25 +382,6 @@ def test_the_shapes_the_screens_take() -> None:
     assert message_problem({**truck, "shift": [1, 2]}) == "key 'shift' is [1, 2], not an object"
     assert message_problem({**truck, "shift": {"extra": "x", "kg": None}}) is None
     assert message_problem({**LIVE, "crowd_doubt": 5}) == "key 'crowd_doubt' is 5, not a text"
-
-
-PASS: dict[str, Any] = {
-    "pass": 3, "truck": 1, "payload_kg": 31027.4, "std_kg": 91.1, "valid": True, "reason": "",
-    "start": 1795318880.0, "end": 1795318899.5, "samples": 600, "misfit": 0.8,
-    "misfit_high": False}
-LIVE: dict[str, Any] = {
-    "time": 1795318890.0, "phase": "lift", "pass": 3, "payload_kg": 30000.0, "std_kg": 120.0,
-    "valid": True, "crowd_doubt": "had no reading for 1.0 s"}
-TRUCK: dict[str, Any] = {
-    "truck": 1, "passes": 4, "total_kg": 120000.0, "std_kg": 180.0, "target_kg": 136000.0,
-    "fill_pct": 88.2, "status": "under", "invalid_passes": 1, "closed": False,
-    "shift": {"window_h": 8, "trucks": 1, "passes": 4, "kg": 120000.0, "not_weighed": 0,
-              "misfit_high": 0},
-    "rule_10_10_20": {"window_h": 8, "trucks": 1, "not_judged": 1, "over_120": 0,
-                      "mean_kg": 120000.0, "target_kg": 136000.0, "mean_pct": 88.2,
-                      "over_110_pct": 0.0, "compliant": True}}
-"""A pass, a live estimate and a truck as the daemon sends them (every field the screens
-read)."""
 
 
 def _left_out(msg: dict[str, Any]) -> Iterator[tuple[str, dict[str, Any]]]:
