@@ -16,8 +16,11 @@ import math
 from typing import Any
 
 NUMBERS = frozenset({"payload_kg", "std_kg", "total_kg", "target_kg", "fill_pct", "misfit",
-                     "time", "start", "end", "start_s", "end_s"})
-"""Finite numbers (or null: the daemon writes a value it has not as null)."""
+                     "time", "start", "end", "start_s", "end_s",
+                     "handle_deg", "crowd_m", "swing_deg", "boom_deg"})
+"""Finite numbers (or null: the daemon writes a value it has not as null); the last four
+are the joints the cab page draws the arm from (a joint as text stopped its drawing,
+and what is drawn after it, until 2026-12-02)."""
 TIMES = frozenset({"time", "start", "end"})
 """Of the numbers, the wall-clock ones (Unix seconds): from 1970 to 9999, as a screen
 writes them as dates."""

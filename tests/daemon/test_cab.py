@@ -382,6 +382,11 @@ def test_the_shapes_the_screens_take() -> None:
     assert message_problem({**truck, "shift": [1, 2]}) == "key 'shift' is [1, 2], not an object"
     assert message_problem({**truck, "shift": {"extra": "x", "kg": None}}) is None
     assert message_problem({**LIVE, "crowd_doubt": 5}) == "key 'crowd_doubt' is 5, not a text"
+    joints = {"time": 1795318890.0, "swing_deg": 12.5, "handle_deg": None, "crowd_m": 2.25,
+              "boom_deg": 45.0, "invalid": ["handle_deg"]}
+    assert message_problem(joints) is None
+    assert message_problem({**joints, "crowd_m": "2.25"}) == (
+        "key 'crowd_m' is '2.25', not a finite number")
 
 
 def _left_out(msg: dict[str, Any]) -> Iterator[tuple[str, dict[str, Any]]]:
