@@ -5,7 +5,6 @@ off, never a number it was not sent ("0.0" where JavaScript turns null into 0) n
 
 from __future__ import annotations
 
-import threading
 import time
 from collections.abc import Iterator
 from typing import Any
@@ -16,6 +15,7 @@ from shoveld.web.browser import open_browser
 from shoveld.web.server import ThreadedScreen
 from shoveld.web.state import ScreenState
 from tests.daemon.conftest import wait_for
+from tests.web.test_panel_sizes import served
 
 LIVE = {"payload_kg": 31234.0, "std_kg": None, "valid": True, "phase": "swing"}
 
@@ -42,24 +42,7 @@ def sparse_state() -> ScreenState:
 def page() -> Iterator[ThreadedScreen]:
     """:func:`sparse_state` served, the shovel heard from every half second with a live
     payload sent without its spread."""
-    st = sparse_state()
-    stop = threading.Event()
-
-    def feed() -> None:
-        while not stop.is_set():
-            st.on_alive("s1", True)
-            st.on_message("s1", "payload/live", LIVE)
-            stop.wait(0.5)
-
-    feeder = threading.Thread(target=feed, daemon=True)
-    feeder.start()
-    screen = ThreadedScreen(st)
-    try:
-        yield screen
-    finally:
-        stop.set()
-        feeder.join(2)
-        screen.close()
+    yield from served(sparse_state(), ["s1"], live=LIVE)
 
 
 def cells(b: Any, body_id: str) -> list[list[str]]:

@@ -7,6 +7,7 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Iterator
+from typing import Any
 
 import pytest
 
@@ -27,20 +28,20 @@ def head(problem: str) -> str:
 
 
 def served(st: ScreenState, shovels: list[str],
-           doubt: dict[str, str] | None = None) -> Iterator[ThreadedScreen]:
-    """The pages of ``st``, each shovel heard from every half second with a live payload
-    of 31.2 t in the swing (a screen with nothing new marks a shovel silent); ``doubt``:
-    the shovels whose crowd is in doubt, and why."""
+           doubt: dict[str, str] | None = None,
+           live: dict[str, Any] | None = None) -> Iterator[ThreadedScreen]:
+    """The pages of ``st``, each shovel heard from every half second with ``live`` (a
+    payload of 31.2 t in the swing if not given: a screen with nothing new marks a shovel
+    silent); ``doubt``: the shovels whose crowd is in doubt, and why."""
     stop = threading.Event()
     doubt = doubt or {}
+    live = live or {"payload_kg": 31234.0, "std_kg": 120.0, "valid": True, "phase": "swing"}
 
     def feed() -> None:
         while not stop.is_set():
             for sid in shovels:
                 st.on_alive(sid, True)
-                st.on_message(sid, "payload/live", {"payload_kg": 31234.0, "std_kg": 120.0,
-                                                    "valid": True, "phase": "swing",
-                                                    "crowd_doubt": doubt.get(sid)})
+                st.on_message(sid, "payload/live", {**live, "crowd_doubt": doubt.get(sid)})
             stop.wait(0.5)
 
     feeder = threading.Thread(target=feed, daemon=True)
