@@ -10,12 +10,13 @@ written independently (see ``docs/diagnosis.md``).
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-Position = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
-"""A body's position in the swing plane from (th, d, boom), as ``plant.Body`` holds it."""
+if TYPE_CHECKING:  # (the plant is imported where it is used)
+    from shoveld.sim.plant import Position
+
 SIM_EFFECTS: dict[str, type[SimEffect]] = {}
 
 

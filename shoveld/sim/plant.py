@@ -89,13 +89,17 @@ class Motion:
             self.phase = np.zeros(n, dtype=np.int8)
 
 
+Position = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+"""(th, d, boom) -> (N, 2) position in the swing plane."""
+
+
 @dataclass
 class Body:
     """A mass in the arm: position (and orientation) as a function of the joints."""
 
     name: str
     mass: np.ndarray | float
-    position: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+    position: Position
     """(th, d, boom) -> (N, 2) position in the swing plane."""
     inertia: float = 0.0
     """Rotational inertia about its centre, perpendicular to the swing plane."""
