@@ -9,7 +9,7 @@ site's router gone (its process ended) and hung (stopped with its sockets open).
 prints, per fault, the time from the fault to the arrival of the first health message
 naming its device (at a Zenoh subscriber, as a cab), in seconds and against the bound
 the issue sets (one health period after the fault can be seen: the device's
-``max_age_s``; a hung router, the router's lease), the live estimates
+``max_age_s``; a hung router, the router probe's ``SILENT_S``), the live estimates
 published as numbers while the fault's inputs were invalid (goal 0), the loop's rate and
 overruns, and the passes published against those in the pass log (goal: none lost).
 
@@ -32,7 +32,7 @@ PARAMS = ROOT / "hil_fixtures" / "captures" / "daemon-e2e" / "params.toml"
 
 def main() -> None:
     from hil_fixtures.fault_drill import cycles, run_drill, summary
-    from shoveld.security.acl import ROUTER_LEASE_S
+    from shoveld.daemon.router_probe import SILENT_S
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=3)
@@ -55,8 +55,8 @@ def main() -> None:
     bound = drills[0].max_age_s + a.health_period
     print(f"per fault over {len(drills)} drills (bound: max_age_s {drills[0].max_age_s:g} s + "
           f"one health period {a.health_period:g} s = {bound:g} s; a hung router is seen "
-          f"when its lease runs out, {ROUTER_LEASE_S:g} s, so "
-          f"{ROUTER_LEASE_S + a.health_period:g} s):")
+          f"when it has not answered the probe for {SILENT_S:g} s, so "
+          f"{SILENT_S + a.health_period:g} s):")
     for line in summary(drills):
         print("  " + line)
 

@@ -4,8 +4,9 @@ The daemon's tests and the fault drill need a router that goes away the way a re
 does (its process ends, its sockets close; or it hangs with its sockets open) and comes
 back on the same endpoint: a Zenoh session in router mode in a child interpreter,
 stopped by closing its stdin, hung and resumed by SIGSTOP and SIGCONT. A plain one has
-the site router's lease (``shoveld pki router-config``'s), which decides when a hung
-one is seen.
+the site router's lease and admin space (``shoveld pki router-config``'s), which decide
+when a hung one is seen; ``admin=False`` closes the admin space, as a router configured
+by hand may have it, so that only the lease does.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from shoveld.security.acl import lease
+from shoveld.security.acl import ADMINSPACE, lease
 
 ROUTER = """
 import json, sys, zenoh
@@ -29,6 +30,8 @@ else:
     c.insert_json5("listen/endpoints", json.dumps([sys.argv[1]]))
     c.insert_json5("scouting/multicast/enabled", "false")
     c.insert_json5("transport/link/tx", sys.argv[2])
+    if sys.argv[3] != "null":
+        c.insert_json5("adminspace", sys.argv[3])
 s = zenoh.open(c)
 print("up", flush=True)
 sys.stdin.read()
@@ -36,11 +39,11 @@ s.close()
 """
 
 
-def start_router(endpoint_or_config: str | Path) -> subprocess.Popen[str]:
+def start_router(endpoint_or_config: str | Path, admin: bool = True) -> subprocess.Popen[str]:
     """A router process (a plain ``tcp/`` one on an endpoint, or from a config file
     ``*.json5``), once it listens; stop it with ``communicate("")``."""
     r = subprocess.Popen([sys.executable, "-c", ROUTER, str(endpoint_or_config),
-                          json.dumps(lease())],
+                          json.dumps(lease()), json.dumps(ADMINSPACE if admin else None)],
                          stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     assert r.stdout is not None
     line = r.stdout.readline().strip()
@@ -55,14 +58,15 @@ class Router:
     """A router on one endpoint that can be stopped and started again (a site router
     restarted, or switched off and on)."""
 
-    def __init__(self, endpoint_or_config: str | Path) -> None:
+    def __init__(self, endpoint_or_config: str | Path, admin: bool = True) -> None:
         self.where = endpoint_or_config
+        self.admin = admin
         self.proc: subprocess.Popen[str] | None = None
         self.hung = False
 
     def start(self) -> Router:
         if self.proc is None:
-            self.proc = start_router(self.where)
+            self.proc = start_router(self.where, self.admin)
         return self
 
     def stop(self) -> None:

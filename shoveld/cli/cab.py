@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 from shoveld.cli import CliError
 from shoveld.cli.options import COUNT, KEY_PREFIX, SECONDS, SHOVEL_OR_ALL
+from shoveld.daemon.router_probe import RouterProbe
 from shoveld.endpoints import endpoint_arg
 from shoveld.payload.trucks import passes_words
 from shoveld.words import n_of
@@ -429,6 +430,8 @@ class CabClient:
         self.prefix = prefix
         self.shovel = shovel
         self.session = zenoh.open(zenoh_config(mode, (), connect, tls=tls))
+        self.probe = RouterProbe(self.session).start()
+        """Sees a router that hangs or is cut off sooner than its lease (:meth:`reaches`)."""
         n = len(prefix.split("/"))
         self._n = n
 
@@ -493,15 +496,20 @@ class CabClient:
 
     def reaches(self) -> int:
         """The routers and peers this session reaches now (a screen listens on nothing:
-        all it hears comes through what it connects to); -1 if Zenoh cannot say."""
+        all it hears comes through what it connects to); -1 if Zenoh cannot say. Routers
+        that have stopped answering the probe are not counted."""
         from shoveld.daemon.publisher import count_links
 
         try:
-            return sum(count_links(self.session).values())
+            links = count_links(self.session)
         except Exception:  # noqa: BLE001 - a closed session
             return -1
+        if self.probe.silent():
+            links["routers"] = 0
+        return sum(links.values())
 
     def close(self) -> None:
+        self.probe.close()
         for s in self._subs:
             try:
                 s.undeclare()

@@ -3,8 +3,8 @@
 ``init`` makes the CA, ``issue NAME --role ROLE`` a peer's certificate and key (a
 shovel's NAME is its ``shovel.id``), ``list`` shows what was issued, and
 ``router-config`` writes a router's Zenoh configuration: mutual TLS, the access
-control built from the issued certificates (``shoveld.security.acl``), and the lease
-by which its peers see it gone when it hangs.
+control built from the issued certificates (``shoveld.security.acl``), its admin space
+open to the probe's question and the lease by which its peers see it gone when it hangs.
 """
 
 from __future__ import annotations

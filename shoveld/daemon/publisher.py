@@ -24,6 +24,7 @@ from collections.abc import Callable
 from typing import Any
 
 from shoveld.daemon.config import TlsConfig, ZenohConfig
+from shoveld.daemon.router_probe import RouterProbe
 
 _RUST_PLACE = re.compile(r"\s+at\s+\S+\.rs:\d+\.?\s*$")
 
@@ -149,6 +150,8 @@ class Publisher:
         self._links_lock = threading.Lock()
         """The loop's health and a status query may count the links at once."""
         self._had_router = False
+        self._probe: RouterProbe | None = None
+        """Asks the routers whether they still answer (only with ``connect``)."""
         self.reach = Reach(", ".join(cfg.connect), "zenoh: cannot reach %s: nothing goes "
                            "through it to the screens and the office; passes are kept in "
                            "the pass log", log)
@@ -201,6 +204,8 @@ class Publisher:
                     session.close()
                     return
                 self._session = session
+                if c.connect:
+                    self._probe = RouterProbe(session).start()
             self.last_error = None
             log.info("zenoh: %s session open (listen %s, connect %s) publishing under %s/",
                      c.mode, list(c.listen), list(c.connect), self.base)
@@ -254,6 +259,9 @@ class Publisher:
             decls, self._decls = self._decls, []
             self._pubs = {}
             self._matching = {}
+            probe, self._probe = self._probe, None
+        if probe is not None:
+            probe.close()
         for d in decls:
             try:
                 d.undeclare()
@@ -333,6 +341,8 @@ class Publisher:
                     d.update(self._links[1])
             if self.cfg.connect:
                 d["connect"] = list(self.cfg.connect)
+                probe = self._probe
+                d["router_probe"] = probe is not None and probe.judged()
                 since = self.reach.since
                 d["unreached_s"] = None if since is None else round(now - since, 1)
         return d
@@ -343,13 +353,17 @@ class Publisher:
         that has had a router must keep one (the cab beside it, a peer, does not carry
         the passes to the office); a peer that never had one, any peer. A router whose
         process ends is seen at once (its sockets close); one hung or cut off the network
-        only when the lease it declared runs out (its ``transport/link/tx/lease``: 2 s
-        in ``shoveld pki router-config``'s, Zenoh's own 10 s: docs/faults.md)."""
+        when it stops answering the probe (``router_probe``: 0.5-1.0 s), or, if its
+        admin space is closed to the probe, only when the lease it declared runs out (its
+        ``transport/link/tx/lease``: 2 s in ``shoveld pki router-config``'s, Zenoh's own
+        10 s: docs/faults.md)."""
         if not self.cfg.connect:
             return
         self._had_router = self._had_router or routers > 0
-        self.reach.update(routers > 0 or (self.cfg.mode != "client" and not self._had_router
-                                          and peers > 0), now)
+        probe = self._probe
+        answering = routers > 0 and (probe is None or not probe.silent(now))
+        self.reach.update(answering or (self.cfg.mode != "client" and not self._had_router
+                                        and peers > 0), now)
 
     LINKS_MAX_AGE_S = 0.5
     """How long the routers and peers counted for :meth:`health` are reused (host

@@ -14,6 +14,9 @@ Per role, at the router (``ingress`` = from that peer, ``egress`` = to it):
   ``PREFIX/*/status``; receive data, replies and tokens; may publish nothing.
 - maintenance: as the office, and may query anything under ``PREFIX/**``.
 - router: another site router; everything passes (each router applies its own list).
+- every role may also ask the router for its own description, ``@/<zid>/router`` in its
+  admin space, and nothing else there: the question by which shovels and screens see a
+  hung or cut-off router sooner than its lease (``shoveld.daemon.router_probe``).
 Everything else is denied (``default_permission: deny``).
 """
 
@@ -26,6 +29,8 @@ from shoveld.security.pki import CertInfo
 
 VIEW_IN = ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"]
 VIEW_OUT = ["put", "delete", "reply", "liveliness_token"]
+PROBE_KEYS = ["@/*/router"]
+"""The admin-space key a router answers ``shoveld.daemon.router_probe``'s question on."""
 ALL_MESSAGES = ["put", "delete", "declare_subscriber", "query", "reply", "declare_queryable",
                 "liveliness_token", "liveliness_query", "declare_liveliness_subscriber"]
 
@@ -51,6 +56,8 @@ def router_acl(certs: Iterable[CertInfo], prefix: str = "shovel") -> dict[str, A
         _rule("maintenance-query", "ingress", ["query"], [f"{prefix}/**"]),
         _rule("router-in", "ingress", ALL_MESSAGES, ["**"]),
         _rule("router-out", "egress", ALL_MESSAGES, ["**"]),
+        _rule("probe-in", "ingress", ["query"], PROBE_KEYS),
+        _rule("probe-out", "egress", ["reply"], PROBE_KEYS),
     ]
     subjects: list[dict[str, Any]] = []
     policies: list[dict[str, Any]] = []
@@ -60,10 +67,12 @@ def router_acl(certs: Iterable[CertInfo], prefix: str = "shovel") -> dict[str, A
                            [f"{prefix}/{name}/**"]))
         subjects.append({"id": f"shovel-{name}", "cert_common_names": [name]})
         policies.append({"id": f"shovel-{name}", "subjects": [f"shovel-{name}"],
-                         "rules": [f"shovel-{name}-in", "to-shovels"]})
-    grants = {"cab": ["view-in", "view-status", "view-out"],
-              "office": ["view-in", "view-status", "view-out"],
-              "maintenance": ["view-in", "view-status", "view-out", "maintenance-query"],
+                         "rules": [f"shovel-{name}-in", "to-shovels", "probe-in",
+                                   "probe-out"]})
+    probe = ["probe-in", "probe-out"]
+    grants = {"cab": ["view-in", "view-status", "view-out", *probe],
+              "office": ["view-in", "view-status", "view-out", *probe],
+              "maintenance": ["view-in", "view-status", "view-out", "maintenance-query", *probe],
               "router": ["router-in", "router-out"]}
     for role, rule_ids in grants.items():
         names = sorted(by_role.get(role, []))
@@ -80,7 +89,7 @@ def router_acl(certs: Iterable[CertInfo], prefix: str = "shovel") -> dict[str, A
 def daemon_acl(prefix: str, shovel_id: str) -> dict[str, Any]:
     """The daemon's own list (any peer that passed mutual TLS): it sends only under its
     own ``PREFIX/ID/**``, takes queries only there (or ``PREFIX/*/status``), and takes
-    no data from anyone."""
+    no data from anyone. It may ask its router the probe's question (and take the answer)."""
     own = f"{prefix}/{shovel_id}/**"
     return {"enabled": True, "default_permission": "deny",
             "rules": [
@@ -90,17 +99,21 @@ def daemon_acl(prefix: str, shovel_id: str) -> dict[str, Any]:
                 # the daemon answers nothing but status; which role may ask what is the
                 # routers' business (this list cannot tell a cab from maintenance)
                 _rule("status-in", "ingress", ["query"], [f"{prefix}/*/status", own]),
+                _rule("probe-out", "egress", ["query"], PROBE_KEYS),
+                _rule("probe-in", "ingress", ["reply"], PROBE_KEYS),
             ],
             "subjects": [{"id": "site"}],
             "policies": [{"subjects": ["site"],
-                          "rules": ["own-out", "listeners-in", "status-in"]}]}
+                          "rules": ["own-out", "listeners-in", "status-in", "probe-out",
+                                    "probe-in"]}]}
 
 
 ROUTER_LEASE_S = 2.0
 """The site router's lease on its links (Zenoh's ``transport/link/tx/lease``; its
 keep-alives go four times a lease). A router that hangs or is cut off with its sockets
-open is seen by the shovels and screens only when the lease it declared runs out,
-between three quarters of it and all of it: 1.6-2.0 s with this, 9.0-9.5 s with
+open is seen by the shovels and screens that cannot ask it (``shoveld.daemon.
+router_probe``: its admin space closed to them) only when the lease it declared runs
+out, between three quarters of it and all of it: 1.6-2.0 s with this, 9.0-9.5 s with
 Zenoh's 10 s (measured with the router stopped by SIGSTOP). Two seconds outlasts a
 Wi-Fi roam or an LTE handover (tens to hundreds of milliseconds); ``router-config
 --lease-s`` sets another."""
@@ -111,8 +124,9 @@ def router_config(listen: list[str], ca: str, cert: str, key: str,
                   connect: list[str] | None = None,
                   lease_s: float = ROUTER_LEASE_S) -> dict[str, Any]:
     """A whole router configuration (for ``zenohd -c`` or ``zenoh.Config.from_json5``):
-    mutual TLS with the site CA on ``listen``, the access control above, and the
-    lease by which its peers see it gone when it hangs."""
+    mutual TLS with the site CA on ``listen``, the access control above, the lease by
+    which its peers see it gone when it hangs, and its admin space open to reading (the
+    access control lets its peers read only the probe's key), by which they see it sooner."""
     tls = {"root_ca_certificate": ca, "enable_mtls": True,
            "listen_certificate": cert, "listen_private_key": key,
            "connect_certificate": cert, "connect_private_key": key}
@@ -120,7 +134,12 @@ def router_config(listen: list[str], ca: str, cert: str, key: str,
             "connect": {"endpoints": list(connect or [])},
             "scouting": {"multicast": {"enabled": False}},
             "transport": {"link": {"tls": tls, "tx": lease(lease_s)}},
+            "adminspace": ADMINSPACE,
             "access_control": router_acl(certs, prefix)}
+
+
+ADMINSPACE = {"enabled": True, "permissions": {"read": True, "write": False}}
+"""A router's admin space, read-only: what answers ``shoveld.daemon.router_probe``."""
 
 
 def lease(lease_s: float = ROUTER_LEASE_S) -> dict[str, int]:

@@ -22,6 +22,7 @@ from hil_fixtures.router import Router, start_router
 from shoveld.cli.cab import CabClient, CabState, watch_link
 from shoveld.daemon.health import problems
 from shoveld.daemon.publisher import Publisher, zenoh_config
+from shoveld.daemon.router_probe import PERIOD_S, SILENT_S
 from shoveld.model.params import ModelParams
 from shoveld.replay.table import table_service
 from shoveld.security.acl import ROUTER_LEASE_S
@@ -189,12 +190,33 @@ def test_a_router_that_goes_away_is_named_and_said_once_in_the_log(
         router.stop()
 
 
-def test_a_site_router_that_hangs_is_named_when_its_lease_runs_out(
+def _hang(router: Router, endpoint: str, pub: Publisher,
+          client: CabClient) -> tuple[float, float]:
+    """Hang ``router`` once both see it, and return the seconds until the screen and the
+    daemon's health said it was gone; then check both reach it again once it answers."""
+    assert wait_for(lambda: pub.health().get("routers") == 1 and client.reaches() == 1,
+                    10.0)
+    time.sleep(4 * PERIOD_S)  # the probes have asked it (or tried to)
+    router.hang()
+    t0 = time.monotonic()
+    assert wait_for(lambda: client.reaches() == 0, 10.0)
+    screen_s = time.monotonic() - t0
+    assert wait_for(lambda: _unreached(pub) != [], 10.0)
+    health_s = time.monotonic() - t0
+    assert _unreached(pub)[0].startswith(f"zenoh: cannot reach {endpoint} for ")
+    router.resume()
+    assert wait_for(lambda: not _unreached(pub) and client.reaches() == 1, 20.0, 0.2), \
+        pub.health()
+    return screen_s, health_s
+
+
+def test_a_site_router_that_hangs_is_named_as_soon_as_it_stops_answering(
         tmp_path: Path, site: Site) -> None:
-    """A router that stops answering with its sockets open (hung, or cut off) is seen only
-    when the lease it declared runs out: the site's, from ``shoveld pki router-config``,
-    2 s rather than Zenoh's 10 s. The shovel's health names it at its next message after
-    that, and a screen through it knows as soon; both reach it again when it answers."""
+    """A router that stops answering with its sockets open (hung, or cut off) keeps the
+    sessions' links until its lease runs out; the router from ``shoveld pki
+    router-config`` answers the probe's question in its admin space (its access list
+    lets the shovel and the cab ask it, over TLS), so both see it gone when it stops
+    answering, well before its 2 s lease."""
     endpoint = f"tls/127.0.0.1:{free_port()}"
     router = Router(site.router_config(endpoint, tmp_path / "router.json5")).start()
     cfg = make_cfg(tmp_path, zenoh={"mode": "client", "listen": [], "connect": [endpoint],
@@ -204,27 +226,73 @@ def test_a_site_router_that_hangs_is_named_when_its_lease_runs_out(
     try:
         assert pub.start(wait_s=10.0).connected
         client = CabClient(CabState(), [endpoint], "client", "s1", tls=site.tls("cab-s1"))
-        assert wait_for(lambda: pub.health().get("routers") == 1 and client.reaches() == 1,
-                        10.0)
-        router.hang()
-        t0 = time.monotonic()
-        assert wait_for(lambda: client.reaches() == 0, 10.0)
-        screen_s = time.monotonic() - t0
-        assert wait_for(lambda: _unreached(pub) != [], 10.0)
-        health_s = time.monotonic() - t0
-        # the lease, then at most one count of the links later (LINKS_MAX_AGE_S), and the
-        # machine (0.2 s, the drill's slack); with Zenoh's own lease this took 9-10 s
-        assert screen_s <= ROUTER_LEASE_S + 0.2, screen_s
-        assert health_s <= ROUTER_LEASE_S + Publisher.LINKS_MAX_AGE_S + 0.2, health_s
-        assert _unreached(pub)[0].startswith(f"zenoh: cannot reach {endpoint} for ")
-        router.resume()
-        assert wait_for(lambda: not _unreached(pub) and client.reaches() == 1, 20.0, 0.2), \
-            pub.health()
+        screen_s, health_s = _hang(router, endpoint, pub, client)
+        assert pub.health()["router_probe"] is True and client.probe.judged()
+        # silent for SILENT_S after its last answer (a probe period or less before the
+        # hang), then at most one count of the links later (LINKS_MAX_AGE_S), and the
+        # machine (0.2 s, the drill's slack); with the lease alone 1.6-2.0 s
+        assert screen_s <= SILENT_S + 0.2, screen_s
+        assert health_s <= SILENT_S + Publisher.LINKS_MAX_AGE_S + 0.2, health_s
     finally:
         if client is not None:
             client.close()
         pub.close()
         router.stop()
+
+
+def test_a_router_that_does_not_answer_the_probe_is_left_to_its_lease(
+        tmp_path: Path) -> None:
+    """A router whose admin space is closed (configured by hand) never answers the probe,
+    which then judges nothing: such a router hung is seen when its lease runs out (2 s
+    from 3/4 of it), not before, and not never."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    router = Router(endpoint, admin=False).start()
+    cfg = make_cfg(tmp_path, zenoh={"mode": "client", "listen": [], "connect": [endpoint]})
+    pub = Publisher(cfg.zenoh, "s1")
+    client: CabClient | None = None
+    try:
+        assert pub.start(wait_s=10.0).connected
+        client = CabClient(CabState(), [endpoint], "client", "s1")
+        screen_s, health_s = _hang(router, endpoint, pub, client)
+        assert pub.health()["router_probe"] is False and not client.probe.judged()
+        assert client.probe.asked > 0 and client.probe.answers == 0
+        assert 0.75 * ROUTER_LEASE_S - 0.05 <= screen_s <= ROUTER_LEASE_S + 0.2, screen_s
+        assert health_s <= ROUTER_LEASE_S + Publisher.LINKS_MAX_AGE_S + 0.2, health_s
+    finally:
+        if client is not None:
+            client.close()
+        pub.close()
+        router.stop()
+
+
+def test_one_of_two_routers_hung_is_not_a_link_lost() -> None:
+    """A screen (or shovel) that reaches two routers still reaches the site while one of
+    them answers: the probe takes the link as lost only when every router it reaches
+    has stopped answering."""
+    endpoints = [f"tcp/127.0.0.1:{free_port()}" for _ in range(2)]
+    routers = [Router(ep).start() for ep in endpoints]
+    client: CabClient | None = None
+    try:
+        client = CabClient(CabState(), endpoints, "peer", "s1")
+        assert wait_for(lambda: client is not None and client.reaches() == 2
+                        and client.probe.answers >= 4, 10.0)
+        routers[0].hang()
+        end = time.monotonic() + 2 * SILENT_S
+        while time.monotonic() < end:  # the other still answers: never silent
+            assert not client.probe.silent() and client.reaches() >= 1
+            time.sleep(0.02)
+        routers[1].hang()
+        t0 = time.monotonic()
+        assert wait_for(lambda: client is not None and client.probe.silent(), 5.0)
+        assert time.monotonic() - t0 <= SILENT_S + 0.2
+        assert client.reaches() == 0
+    finally:
+        for r in routers:
+            r.resume()
+        if client is not None:
+            client.close()
+        for r in routers:
+            r.stop()
 
 
 def test_a_screen_says_its_own_link_is_down_when_its_router_goes_away(

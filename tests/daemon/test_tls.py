@@ -338,6 +338,18 @@ def test_router_refuses_intruders_and_fakes(tmp_path: Path, e2e_table: SignalsTa
         got = [r for r in laptop.get("shovel/s1/**", timeout=3.0) if r.ok]
         assert len(got) == 1 and str(got[0].ok.key_expr) == "shovel/s1/status"
         fake_q.undeclare()
+
+        # the router's admin space: every site role may ask for its description (the
+        # probe by which a hung router is seen sooner than its lease) and for nothing
+        # else there; the stranger not even that; the daemon, under its own access list,
+        # asked it and was answered
+        zid = str(next(iter(cab_session.info.routers_zid())))
+        for s in (cab_session, office.session, laptop, fakers["s2"]):
+            assert [str(r.ok.key_expr) for r in s.get(f"@/{zid}/router", timeout=3.0)
+                    if r.ok] == [f"@/{zid}/router"]
+            assert [r for r in s.get(f"@/{zid}/**", timeout=1.5) if r.ok] == []
+        assert [r for r in stranger.get(f"@/{zid}/router", timeout=1.5) if r.ok] == []
+        assert svc.publisher.health()["router_probe"] is True
     finally:
         for m in reversed(made):
             m.close()

@@ -1,0 +1,110 @@
+"""Whether the site's routers still answer: a small question to each, twice a second.
+
+A router that hangs, or a network cut that leaves its sockets open (a cable or a radio
+link gone, the usual field case), keeps a session's link until the lease that router
+declared runs out: 1.6-2.0 s with ``shoveld pki router-config``'s 2 s, 9-10 s with
+Zenoh's own; until then every put goes nowhere and nothing says so. A router with its
+admin space open answers a query for ``@/<zid>/router`` within milliseconds, so one
+that stops answering is seen within :data:`SILENT_S`. Only a router that has answered
+once is held to it: one whose admin space is closed (a router configured by hand, or
+an access list without the rule ``router-config`` writes) is left to its lease, as
+before. The daemon's publisher and the screens each run one (docs/zenoh.md).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from typing import Any
+
+log = logging.getLogger(__name__)
+
+PERIOD_S = 0.5
+"""How often each router is asked. A question and its answer cost the asking process
+about 1 ms of CPU on this project's machine (``bench/router_probe.py``), so twice a
+second is about 0.2 % of a core; four times would see a hung router a quarter second
+sooner for twice that."""
+
+SILENT_S = 1.0
+"""A router that answered before and has not for this long is taken as gone (0.5-1.0 s
+after it stopped): two questions unanswered, well above a site network's round trip
+(milliseconds) and a Wi-Fi roam's gap (tens to hundreds of milliseconds), under the
+2 s lease, which sees it 1.5-2.0 s after."""
+
+KEY = "@/{zid}/router"
+"""What is asked: the router's own description in its admin space (the access lists of
+``shoveld.security.acl`` let every site role ask this key and nothing else there)."""
+
+
+class RouterProbe:
+    """Asks each router a Zenoh session reaches for :data:`KEY` every ``period_s`` in a
+    thread of its own, and says whether all of them that have answered before have now
+    been silent for ``silent_s`` (:meth:`silent`)."""
+
+    def __init__(self, session: Any, period_s: float = PERIOD_S,
+                 silent_s: float = SILENT_S) -> None:
+        self.session = session
+        self.period_s = period_s
+        self.silent_s = silent_s
+        self._answered: dict[str, float] = {}
+        """Router id -> monotonic time of its last answer (only routers that answered)."""
+        self._current: tuple[str, ...] = ()
+        """The routers the session reached at the last round of questions."""
+        self.asked = 0
+        self.answers = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="zenoh-probe", daemon=True)
+
+    def start(self) -> RouterProbe:
+        self._thread.start()
+        return self
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout=2.0)
+
+    def _run(self) -> None:
+        import zenoh
+
+        # each answer as it comes: Zenoh's default consolidation holds them until every
+        # router the question went to has finished, so one hung router would silence
+        # the answers of the others until the question's timeout
+        each = zenoh.ConsolidationMode.NONE
+        while not self._stop.wait(self.period_s):
+            try:
+                self._current = tuple(str(z) for z in self.session.info.routers_zid())
+                for zid in self._current:
+                    self.session.get(KEY.format(zid=zid), handler=self._on_reply_of(zid),
+                                     consolidation=each, timeout=self.silent_s)
+                    self.asked += 1
+            except Exception as e:  # noqa: BLE001 - the session closed under us: stop asking
+                log.debug("zenoh: router probe stopped (%s)", e)
+                return
+
+    def _on_reply_of(self, zid: str) -> Any:
+        def on_reply(reply: Any) -> None:
+            if reply.ok is not None:  # a timeout comes as an error reply
+                self._answered[zid] = time.monotonic()
+                self.answers += 1
+        return on_reply
+
+    def silent(self, now: float | None = None) -> bool:
+        """True when the session reaches routers, every one of them has answered before,
+        and none has answered for ``silent_s``: all are hung or cut off. A router that
+        never answered cannot be judged (its admin space is closed) and counts as
+        answering, so that its lease decides."""
+        current = self._current
+        if not current:
+            return False
+        now = time.monotonic() if now is None else now
+        for zid in current:
+            last = self._answered.get(zid)
+            if last is None or now - last <= self.silent_s:
+                return False
+        return True
+
+    def judged(self) -> bool:
+        """Whether any router this session reaches has answered (the probe is in effect)."""
+        return any(z in self._answered for z in self._current)
