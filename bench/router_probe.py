@@ -19,23 +19,16 @@ import argparse
 import random
 import statistics
 import time
-from collections.abc import Callable
 from typing import Any
 
 from hil_fixtures.net import free_port
 from hil_fixtures.router import Router
-from shoveld.daemon.publisher import zenoh_config
+from shoveld.daemon.publisher import wait_until, zenoh_config
 from shoveld.daemon.router_probe import PERIOD_S, SILENT_S, RouterProbe
 from shoveld.security.acl import ROUTER_LEASE_S
 
-
-def _wait(pred: Callable[[], bool], timeout: float, step: float = 0.002) -> bool:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if pred():
-            return True
-        time.sleep(step)
-    return pred()
+STEP_S = 0.002
+"""How often the bench looks (the seconds it prints are to this)."""
 
 
 def hangs(admin: bool, n: int, rng: random.Random) -> list[float]:
@@ -56,12 +49,13 @@ def hangs(admin: bool, n: int, rng: random.Random) -> list[float]:
 
         try:
             for _ in range(n):
-                if not _wait(lambda: routers() == 1 and (probe.judged() or not admin), 20.0):
+                if not wait_until(lambda: routers() == 1 and (probe.judged() or not admin), 20.0,
+                                  STEP_S):
                     raise RuntimeError("the router was not reached again")
                 time.sleep(rng.uniform(1.0, 1.0 + PERIOD_S))  # any moment between questions
                 router.hang()
                 t0 = time.monotonic()
-                seen = _wait(gone, 10.0)
+                seen = wait_until(gone, 10.0, STEP_S)
                 out.append(time.monotonic() - t0 if seen else float("nan"))
                 router.resume()
         finally:
@@ -80,7 +74,7 @@ def cpu(blocks: int, seconds: float) -> list[float]:
     with Router(endpoint):
         session: Any = zenoh.open(zenoh_config("client", (), [endpoint]))
         try:
-            _wait(lambda: len(list(session.info.routers_zid())) == 1, 10.0)
+            wait_until(lambda: len(list(session.info.routers_zid())) == 1, 10.0, STEP_S)
             for _ in range(blocks):
                 pair = []
                 for on in (False, True):
