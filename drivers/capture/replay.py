@@ -467,8 +467,10 @@ class _ModbusFeeder:
                                      baudrate=int(cfg.get("baudrate", 19200)))
         self.server.on_request = self._on_request
         # a recorded timeout is replayed as silence; the client then waits its timeout
-        # in real time, during which a stepped clock must not run ahead
-        self.server.drop_hold_s = float(cfg.get("timeout_s", 0.1)) + 0.01
+        # in real time (over RTU twice: it watches the line for a late answer as long
+        # again), during which a stepped clock must not run ahead
+        waits = 1 if transport == "tcp" else 2
+        self.server.drop_hold_s = waits * float(cfg.get("timeout_s", 0.1)) + 0.01
         self.endpoint = ModbusEndpoint(entry.name, entry.kind)
         self._served_t = -1.0
         self._seen: tuple[float, float] = (-1.0, 0.0)

@@ -8,8 +8,10 @@ exception is listed in ``Reading.invalid`` and *not* in ``values``: the previous
 good value is never repeated as if it were new, and nothing becomes zero.
 
 Per-channel health lives in ``health.extra["channels"][name]``: ``state``
-(``ok`` / ``timeout`` / ``exception`` / ``never``), ``timeouts``, ``exceptions``,
-``last_ok_t`` and ``stale`` (no good value for ``stale_after_s``).
+(``ok`` / ``timeout`` / ``exception`` / ``late`` / ``never``), ``timeouts``,
+``exceptions``, ``last_ok_t`` and ``stale`` (no good value for ``stale_after_s``). Over
+RTU, while the module answers after its timeout (``answering_late``), its channels are
+``late`` and invalid: an RTU answer does not say which request it answers.
 After ``reconnect_after`` consecutive polls the module did not answer at all, ``read``
 raises :class:`~drivers.base.DeviceError` and the base class reconnects with
 back-off.
@@ -320,6 +322,11 @@ class ModbusAdcDriver(Driver):
         self._garbled: str | None = None
         """What the framer threw away in the current request: an answer that was not
         Modbus (:meth:`_watch_framer`); None if nothing."""
+        self._decode: Callable[[bytes], tuple[int, int, int, bytes]] | None = None
+        """The RTU framer's own frame decoder (:meth:`_drain_line`); None: none watched."""
+        self._watch_until = -math.inf
+        """RTU: the line is watched for a late answer until then (``time.monotonic``)
+        before the next request goes out (:meth:`_timed_out`)."""
         self._plan = [(address, count, chans,
                        tuple((ch.name, ch.register - address, ch.word_decoder(), chh[ch.name])
                              for ch in chans))
@@ -393,6 +400,7 @@ class ModbusAdcDriver(Driver):
         decode, handle = framer.decode, framer.handleFrame
         tcp = self.config.transport == "tcp"
         expected = [0]
+        self._decode = decode
 
         def watched(data: bytes) -> tuple[int, int, int, bytes]:
             if not tcp:
@@ -429,6 +437,46 @@ class ModbusAdcDriver(Driver):
         self.health.rejected_bytes += nbytes
         self._garbled = what
 
+    def _drain_line(self, client: Any, wait_s: float) -> None:
+        """Over RTU, what came on the line while no request waited for it: a late answer
+        (counted in ``late_answers``, ``answering_late`` set) or noise (a bad frame).
+        RTU has no transaction id, so an answer that comes after its request's timeout
+        would be taken as the next request's (pymodbus empties the line before a request,
+        silently but for a WARNING line). As libmodbus does in its error recovery, the
+        line is watched for ``wait_s`` (up to ``timeout_s`` after a timeout: the request's
+        answer may still be on its way) and read before every request; an answer is taken
+        as it comes, when the line has been quiet for three and a half characters (RTU's
+        frame gap)."""
+        sock = getattr(client, "socket", None)
+        if sock is None or self._decode is None:  # an in-memory client (replays, tests)
+            return
+        char_s = 11.0 / self.config.baudrate
+        quiet = max(0.002, 3.5 * char_s)
+        now = time.monotonic()
+        deadline, cap = now + wait_s, now + wait_s + 256 * char_s + quiet
+        size = 0
+        try:
+            while True:
+                avail = sock.in_waiting
+                if avail and avail == size:  # came, and nothing more for a frame gap
+                    break
+                now = time.monotonic()
+                if not avail and now >= deadline:
+                    return
+                if now >= cap:
+                    break
+                size = avail
+                time.sleep(quiet)
+            data = sock.read(avail)
+        except (OSError, ValueError):  # the port closed or went away: the request says so
+            return
+        _used, dev, _tid, frame = self._decode(data) if data else (0, 0, 0, b"")
+        if frame and dev == self.config.unit:
+            self.health.extra["late_answers"] += 1
+            self._late = True
+        elif data:
+            self._thrown_away(len(data), "bytes on the line between requests")
+
     def open(self) -> None:
         self.close()
         client = self._make_client()
@@ -439,6 +487,7 @@ class ModbusAdcDriver(Driver):
         self._failed_polls = 0
         self._next_poll = None
         self._target = None
+        self._watch_until = -math.inf
 
     def close(self) -> None:
         client, self._client = self._client, None
@@ -460,19 +509,22 @@ class ModbusAdcDriver(Driver):
         fn = client.read_input_registers if c.function == "input" else \
             client.read_holding_registers
         self._garbled = None
+        rtu = c.transport == "rtu"
+        if rtu:
+            self._drain_line(client, self._watch_until - time.monotonic())
         try:
             rr = fn(address, count=count, device_id=c.unit)
         except (TimeoutError, OSError):
-            return None, "timeout", None
+            return self._timed_out(rtu)
         except Exception as e:  # noqa: BLE001 - narrowed below, pymodbus imported only now
             from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
 
             if isinstance(e, ModbusIOException | ConnectionException):
-                return None, "timeout", None
+                return self._timed_out(rtu)
             if not isinstance(e, ModbusException):
                 raise
             log.debug("%s: modbus error %s", self.name, e)
-            return None, "timeout", None
+            return self._timed_out(rtu)
         if rr.isError():
             code = getattr(rr, "exception_code", None)
             return None, "exception", int(code) if code is not None else 4
@@ -485,6 +537,15 @@ class ModbusAdcDriver(Driver):
             return None, "exception", None
         return regs, None, None
 
+    def _timed_out(self, rtu: bool) -> tuple[None, str, None]:
+        """A request not answered within ``timeout_s``; over RTU the line is watched for
+        as long again before the next request (:meth:`_drain_line`), so an answer up to
+        twice the timeout late is seen late and not taken as the next request's. The
+        watch waits in the next request, so this one's reading is not held back."""
+        if rtu:
+            self._watch_until = time.monotonic() + self.config.timeout_s
+        return None, "timeout", None
+
     def poll(self, sink: Sink) -> Reading:
         """Read every block once and emit one reading (also returned)."""
         c = self.config
@@ -495,6 +556,8 @@ class ModbusAdcDriver(Driver):
         self._late = False
         clock = self.clock
         isfinite = math.isfinite
+        extra = self.health.extra
+        rtu = c.transport == "rtu"
         t = clock()
         for address, count, chans, decoders in self._plan:
             words, err, code = self._read_block(address, count)
@@ -506,6 +569,16 @@ class ModbusAdcDriver(Driver):
                     error=err, exception_code=code))
             if err != "timeout":
                 answered = True
+            if words is not None and rtu and (self._late or extra["answering_late"]):
+                # over RTU an answer carries nothing to say which request it answers:
+                # while the module answers late, this one may be an earlier request's
+                for ch in chans:
+                    invalid.add(ch.name)
+                    h = extra["channels"][ch.name]
+                    h["state"] = "late"
+                    h["last_error"] = (f"answers after the {c.timeout_s:g} s timeout: over RTU "
+                                       "an answer cannot be told from an earlier one's")
+                continue
             if words is not None:
                 for name, offset, decode, h in decoders:
                     v = decode(words[offset])

@@ -108,8 +108,9 @@ def problems(drivers: Mapping[str, dict[str, Any]], loop: dict[str, Any],
                        "something in the beam?)")
         chans = d.get("channels")
         if isinstance(chans, dict):
+            # "late": answering after the timeout over RTU, said by the line above
             bad = [c for c, h in chans.items() if isinstance(h, dict)
-                   and h.get("state") not in ("ok", None)]
+                   and h.get("state") not in ("ok", None, "late")]
             if bad:
                 out.append(f"{name}: channels {', '.join(bad)} not answering")
     if not zenoh.get("open"):

@@ -212,15 +212,20 @@ def test_a_module_that_babbles_is_named_in_health(transport: str,
         assert run.wait_for(lambda: not h.extra["babbling"], 2)
 
 
+@pytest.mark.parametrize("transport", ["tcp", "rtu"])
 def test_a_module_that_answers_after_the_timeout_is_named_in_health(
-        caplog: pytest.LogCaptureFixture) -> None:
-    """A Modbus TCP module whose answers come after the driver's timeout: each lands in
-    a later request's wait, where its transaction id shows it late. It is counted and
-    health says so, once; until 2026-11-30 the channels were only "not answering" now
-    and then, and pymodbus wrote an ERROR line with a dump of twenty frames for each."""
+        transport: str, caplog: pytest.LogCaptureFixture) -> None:
+    """A module whose answers come after the driver's timeout. Over TCP each lands in a
+    later request's wait, where its transaction id shows it late; until 2026-11-30 the
+    channels were only "not answering" now and then, and pymodbus wrote an ERROR line
+    with a dump of twenty frames for each. Over RTU an answer says nothing of which
+    request it answers: until 2026-12-02 each was taken as a later request's, its values
+    published as new (0.3 s old here) and health said nothing; now the line is watched
+    after a timeout, the late answer is counted, and the channels are invalid while the
+    fault lasts. Either way it is counted and health says so, once."""
     from shoveld.daemon.health import problems
 
-    with ModbusAdcEmulator(lambda t: VALUES, CHANNELS) as emu, \
+    with ModbusAdcEmulator(lambda t: VALUES, CHANNELS, transport=transport) as emu, \
             DriverRunner(fast(emu, reconnect_after=1000)) as run:
         h = run.driver.health
         assert run.wait_for(lambda: len(run.readings) >= 5, 5)
@@ -238,6 +243,15 @@ def test_a_module_that_answers_after_the_timeout_is_named_in_health(
         assert not client_errors(caplog), caplog.text
         warned = [r for r in caplog.records if "answering late" in r.getMessage()]
         assert len(warned) == 1, caplog.text  # once, not once a poll
+        if transport == "rtu":
+            # no answer is taken while the module is late: every reading since is
+            # invalid, and the channels say why
+            n = len(run.readings)
+            assert run.wait_for(lambda: len(run.readings) >= n + 5, 10)
+            assert all(r.invalid == set(VALUES) and not r.values
+                       for r in run.readings[n:]), run.readings[n:]
+            assert all(c["state"] in ("late", "timeout")
+                       for c in h.extra["channels"].values()), h.extra["channels"]
         assert isinstance(run.driver, ModbusAdcDriver)
         run.driver.fault_hold_s = 0.3
         emu.server.delay_s = 0.0
