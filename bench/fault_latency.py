@@ -13,7 +13,8 @@ the issue sets (one health period after the fault can be seen: the device's
 published as numbers while the fault's inputs were invalid (goal 0), the loop's rate and
 overruns, and the passes published against those in the pass log (goal: none lost).
 
-Usage: ``.venv/bin/python bench/fault_latency.py [--runs 3] [--health-period 1.0]``
+Usage: ``.venv/bin/python bench/fault_latency.py [--runs 3] [--health-period 1.0]
+[--adc tcp|rtu]`` (``rtu``: the Modbus modules over RTU on pseudo-terminals)
 (about 100 s a run, and the table of cycles first)
 """
 
@@ -38,13 +39,15 @@ def main() -> None:
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--health-period", type=float, default=1.0)
     ap.add_argument("--passes", type=int, default=8, help="dig cycles played (8)")
+    ap.add_argument("--adc", choices=("tcp", "rtu"), default="tcp",
+                    help="the Modbus modules' transport (tcp; rtu over pseudo-terminals)")
     a = ap.parse_args()
     table = cycles(a.passes)
     drills = []
     for i in range(a.runs):
         with tempfile.TemporaryDirectory() as tmp:
             d = run_drill(table, PARAMS, Path(tmp), health_period_s=a.health_period,
-                          seed=i + 1)
+                          seed=i + 1, adc_transport=a.adc)
         drills.append(d)
         worst = max((o.latency_s for o in d.outcomes if o.latency_s is not None),
                     default=float("nan"))

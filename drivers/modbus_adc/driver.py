@@ -49,14 +49,15 @@ class _SaidByTheDriver(logging.Filter):
     channel in its health), and every failed connection, TCP or serial (the driver's
     "cannot connect to Modbus module at ...", once per back-off). Those lines are noise
     in the journal here, and so is the "Repeating...." pymodbus writes in their place
-    when one comes again."""
+    when one comes again (with its dump of the frames since, when there were any: such
+    lines went to the journal until 2026-12-02)."""
 
     SAID = ("No response received", "Connection to (")
     dropped = False
 
     def filter(self, record: logging.LogRecord) -> bool:
         text = str(record.getMessage())
-        if text == "Repeating....":
+        if text.partition("\n")[0] == "Repeating....":
             return not self.dropped
         # pyserial's "[Errno 2] could not open port /dev/ttyUSB0: ..." as it is
         self.dropped = text.startswith(self.SAID) or "could not open port" in text

@@ -261,6 +261,28 @@ def test_a_module_that_answers_after_the_timeout_is_named_in_health(
                             5)
 
 
+def test_pymodbus_repeating_a_line_the_driver_says_itself_is_not_logged() -> None:
+    """pymodbus writes "Repeating...." in place of an ERROR line it wrote just before,
+    with its dump of the frames sent and received since when there were any; the repeat
+    of a line the driver says itself (an unanswered request) is dropped with it, dump or
+    not. Until 2026-12-02 the repeat with a dump went to the journal (seen in the fault
+    drill over RTU: "Repeating...." and four ">>>>> recv/send" lines)."""
+    from drivers.modbus_adc.driver import _SaidByTheDriver
+
+    def record(text: str) -> logging.LogRecord:
+        return logging.LogRecord("pymodbus.logging", logging.ERROR, __file__, 1, text,
+                                 None, None)
+
+    said = _SaidByTheDriver()
+    dump = "\n>>>>> recv: 0x2 0x4 0x0 0x0 0x0 0x3 0xb0 0x38 extra data: "
+    assert not said.filter(record("No response received after 0 retries, continue" + dump))
+    assert not said.filter(record("Repeating...." + dump))
+    assert not said.filter(record("Repeating...."))
+    # a line the driver does not say, and its repeat, pass
+    assert said.filter(record("Unable to decode frame" + dump))
+    assert said.filter(record("Repeating...." + dump))
+
+
 def test_an_answer_to_a_client_that_left_is_not_an_error_in_the_log(
         caplog: pytest.LogCaptureFixture) -> None:
     """A late answer whose client has gone (it timed out and reconnected): pymodbus's
