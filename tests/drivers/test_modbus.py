@@ -220,9 +220,10 @@ def test_a_module_that_answers_after_the_timeout_is_named_in_health(
     channels were only "not answering" now and then, and pymodbus wrote an ERROR line
     with a dump of twenty frames for each. Over RTU an answer says nothing of which
     request it answers: until 2026-12-02 each was taken as a later request's, its values
-    published as new (0.3 s old here) and health said nothing; now the line is watched
-    after a timeout, the late answer is counted, and the channels are invalid while the
-    fault lasts. Either way it is counted and health says so, once."""
+    published as new (answers to requests sent 0.3 s before here) and health said
+    nothing; now the line is watched after a timeout, the late answer is counted, and the
+    channels are invalid while the fault lasts. Either way it is counted and health says
+    so, once."""
     from shoveld.daemon.health import problems
 
     with ModbusAdcEmulator(lambda t: VALUES, CHANNELS, transport=transport) as emu, \
