@@ -328,6 +328,9 @@ class ModbusAdcDriver(Driver):
         self._watch_until = -math.inf
         """RTU: the line is watched for a late answer until then (``time.monotonic``)
         before the next request goes out (:meth:`_timed_out`)."""
+        self._rtu = config.transport == "rtu"
+        """No transaction id: a late answer is found by watching the line
+        (:meth:`_drain_line`), and the channels are invalid while the module is late."""
         self._plan = [(address, count, chans,
                        tuple((ch.name, ch.register - address, ch.word_decoder(), chh[ch.name])
                              for ch in chans))
@@ -471,11 +474,13 @@ class ModbusAdcDriver(Driver):
             data = sock.read(avail)
         except (OSError, ValueError):  # the port closed or went away: the request says so
             return
-        _used, dev, _tid, frame = self._decode(data) if data else (0, 0, 0, b"")
+        if not data:
+            return
+        _used, dev, _tid, frame = self._decode(data)
         if frame and dev == self.config.unit:
             self.health.extra["late_answers"] += 1
             self._late = True
-        elif data:
+        else:
             self._thrown_away(len(data), "bytes on the line between requests")
 
     def open(self) -> None:
@@ -510,22 +515,21 @@ class ModbusAdcDriver(Driver):
         fn = client.read_input_registers if c.function == "input" else \
             client.read_holding_registers
         self._garbled = None
-        rtu = c.transport == "rtu"
-        if rtu:
+        if self._rtu:
             self._drain_line(client, self._watch_until - time.monotonic())
         try:
             rr = fn(address, count=count, device_id=c.unit)
         except (TimeoutError, OSError):
-            return self._timed_out(rtu)
+            return self._timed_out()
         except Exception as e:  # noqa: BLE001 - narrowed below, pymodbus imported only now
             from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
 
             if isinstance(e, ModbusIOException | ConnectionException):
-                return self._timed_out(rtu)
+                return self._timed_out()
             if not isinstance(e, ModbusException):
                 raise
             log.debug("%s: modbus error %s", self.name, e)
-            return self._timed_out(rtu)
+            return self._timed_out()
         if rr.isError():
             code = getattr(rr, "exception_code", None)
             return None, "exception", int(code) if code is not None else 4
@@ -538,12 +542,12 @@ class ModbusAdcDriver(Driver):
             return None, "exception", None
         return regs, None, None
 
-    def _timed_out(self, rtu: bool) -> tuple[None, str, None]:
+    def _timed_out(self) -> tuple[None, str, None]:
         """A request not answered within ``timeout_s``; over RTU the line is watched for
         as long again before the next request (:meth:`_drain_line`), so an answer up to
         twice the timeout late is seen late and not taken as the next request's. The
         watch waits in the next request, so this one's reading is not held back."""
-        if rtu:
+        if self._rtu:
             self._watch_until = time.monotonic() + self.config.timeout_s
         return None, "timeout", None
 
@@ -558,7 +562,7 @@ class ModbusAdcDriver(Driver):
         clock = self.clock
         isfinite = math.isfinite
         extra = self.health.extra
-        rtu = c.transport == "rtu"
+        rtu = self._rtu
         t = clock()
         for address, count, chans, decoders in self._plan:
             words, err, code = self._read_block(address, count)
