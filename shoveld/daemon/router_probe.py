@@ -4,11 +4,12 @@ A router that hangs, or a network cut that leaves its sockets open (a cable or a
 link gone, the usual field case), keeps a session's link until the lease that router
 declared runs out: 1.6-2.0 s with ``shoveld pki router-config``'s 2 s, 9-10 s with
 Zenoh's own; until then every put goes nowhere and nothing says so. A router with its
-admin space open answers a query for ``@/<zid>/router`` within milliseconds, so one
-that stops answering is seen within :data:`SILENT_S`. Only a router that has answered
-once is held to it: one whose admin space is closed (a router configured by hand, or
-an access list without the rule ``router-config`` writes) is left to its lease, as
-before. The daemon's publisher and the screens each run one (docs/zenoh.md).
+admin space open answers a query for its build line (``@/<zid>/router/metrics``) within
+milliseconds, so one that stops answering is seen within :data:`SILENT_S`. Only a
+router that has answered once is held to it: one whose admin space is closed (a router
+configured by hand, or an access list without the rule ``router-config`` writes) is
+left to its lease, as before. The daemon's publisher and the screens each run one
+(docs/zenoh.md).
 """
 
 from __future__ import annotations
@@ -32,9 +33,14 @@ after it stopped): two questions unanswered, well above a site network's round t
 (milliseconds) and a Wi-Fi roam's gap (tens to hundreds of milliseconds), under the
 2 s lease, which sees it 1.5-2.0 s after."""
 
-KEY = "@/{zid}/router"
-"""What is asked: the router's own description in its admin space (the access lists of
-``shoveld.security.acl`` let every site role ask this key and nothing else there)."""
+KEY = "@/{zid}/router/metrics?compression=false;descriptors=false"
+"""What is asked: the router's metrics in its admin space, which a Zenoh built without its
+``stats`` feature (``zenohd``'s and the Python wheel's default) answers with one line,
+its id and version; the parameters spare it the compression and the comments. An answer
+from the router is all the probe needs, and this one tells nothing else: the router's own
+description (``@/<zid>/router``, asked until 2026-12-02) lists the id and address of
+every peer linked to it. The access lists of ``shoveld.security.acl`` let every site
+role ask this key and nothing else there."""
 
 
 class RouterProbe:

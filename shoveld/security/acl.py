@@ -14,9 +14,11 @@ Per role, at the router (``ingress`` = from that peer, ``egress`` = to it):
   ``PREFIX/*/status``; receive data, replies and tokens; may publish nothing.
 - maintenance: as the office, and may query anything under ``PREFIX/**``.
 - router: another site router; everything passes (each router applies its own list).
-- every role may also ask the router for its own description, ``@/<zid>/router`` in its
-  admin space, and nothing else there: the question by which shovels and screens see a
-  hung or cut-off router sooner than its lease (``shoveld.daemon.router_probe``).
+- every role may also ask the router for its metrics, ``@/<zid>/router/metrics`` in its
+  admin space (its id and version), and nothing else there: the question by which
+  shovels and screens see a hung or cut-off router sooner than its lease
+  (``shoveld.daemon.router_probe``). Its description (``@/<zid>/router``: every peer
+  linked to it, with its address) is not readable by any role.
 Everything else is denied (``default_permission: deny``).
 """
 
@@ -29,7 +31,7 @@ from shoveld.security.pki import CertInfo
 
 VIEW_IN = ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"]
 VIEW_OUT = ["put", "delete", "reply", "liveliness_token"]
-PROBE_KEYS = ["@/*/router"]
+PROBE_KEYS = ["@/*/router/metrics"]
 """The admin-space key a router answers ``shoveld.daemon.router_probe``'s question on."""
 ALL_MESSAGES = ["put", "delete", "declare_subscriber", "query", "reply", "declare_queryable",
                 "liveliness_token", "liveliness_query", "declare_liveliness_subscriber"]

@@ -23,6 +23,7 @@ from hil_fixtures.router import start_router
 from shoveld.cli.cab import CabClient, CabState
 from shoveld.daemon.config import TlsConfig
 from shoveld.daemon.publisher import zenoh_config
+from shoveld.daemon.router_probe import KEY
 from shoveld.model.params import ModelParams
 from shoveld.replay.table import table_service
 from shoveld.security import pki
@@ -339,16 +340,21 @@ def test_router_refuses_intruders_and_fakes(tmp_path: Path, e2e_table: SignalsTa
         assert len(got) == 1 and str(got[0].ok.key_expr) == "shovel/s1/status"
         fake_q.undeclare()
 
-        # the router's admin space: every site role may ask for its description (the
-        # probe by which a hung router is seen sooner than its lease) and for nothing
-        # else there; the stranger not even that; the daemon, under its own access list,
+        # the router's admin space: every site role may ask for its metrics (the probe
+        # by which a hung router is seen sooner than its lease: its id and version) and
+        # for nothing else there, not its description (every peer linked to it, with its
+        # address); the stranger not even that; the daemon, under its own access list,
         # asked it and was answered
         zid = str(next(iter(cab_session.info.routers_zid())))
+        probe_key = KEY.format(zid=zid)
         for s in (cab_session, office.session, laptop, fakers["s2"]):
-            assert [str(r.ok.key_expr) for r in s.get(f"@/{zid}/router", timeout=3.0)
-                    if r.ok] == [f"@/{zid}/router"]
+            got = [r.ok for r in s.get(probe_key, timeout=3.0) if r.ok]
+            assert [str(g.key_expr) for g in got] == [f"@/{zid}/router/metrics"]
+            text = got[0].payload.to_string()  # its build line, no peer's address
+            assert "zenoh_build" in text and "127.0.0.1" not in text, text
+            assert [r for r in s.get(f"@/{zid}/router", timeout=1.5) if r.ok] == []
             assert [r for r in s.get(f"@/{zid}/**", timeout=1.5) if r.ok] == []
-        assert [r for r in stranger.get(f"@/{zid}/router", timeout=1.5) if r.ok] == []
+        assert [r for r in stranger.get(probe_key, timeout=1.5) if r.ok] == []
         assert svc.publisher.health()["router_probe"] is True
     finally:
         for m in reversed(made):
