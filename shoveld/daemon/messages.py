@@ -7,7 +7,9 @@ ended in a traceback in Zenoh's callback (``Unknown format code 'f' for object o
 'str'``), the message lost without a word, or was shown ("pass a truck None"). Here
 each field the screens read has its kind; a message with a field of another kind is
 refused whole, with what is wrong, and the screens count it. Fields they do not read
-are left alone, and a field may be absent (the screens have a default for each).
+are left alone, and a field may be absent (the screens have a default for each). The
+lists are by hand; ``tests/daemon/test_cab.py::test_every_field_the_screens_read_is_checked``
+feeds the screens the daemon's messages and fails on a field they read that is not here.
 """
 
 from __future__ import annotations
@@ -31,6 +33,9 @@ day short of its end, for any time zone); ``shoveld passes`` and ``report`` take
 COUNTS = frozenset({"pass", "truck", "passes", "invalid_passes", "samples"})
 """Whole numbers, 0 or more."""
 FLAGS = frozenset({"valid", "closed", "misfit_high"})
+LISTS = frozenset({"problems", "invalid"})
+"""Lists of texts: a health message's problems, and the joints' inputs not valid (the
+cab page gets the joints message whole)."""
 TEXTS = frozenset({"reason", "status", "phase", "crowd_doubt"})
 PARTS: dict[str, dict[str, str]] = {
     "shift": {"window_h": "number", "trucks": "count", "passes": "count", "kg": "number",
@@ -77,7 +82,7 @@ def _kind_ok(key: str, v: Any) -> str | None:
     elif key in TEXTS:
         if not isinstance(v, str):
             return "a text"
-    elif key == "problems":
+    elif key in LISTS:
         if not isinstance(v, list) or not all(isinstance(x, str) for x in v):
             return "a list of texts"
     return None

@@ -219,17 +219,16 @@ def test_cab_cli_on_zenoh(tmp_path: Path, e2e_table: SignalsTable, params: Model
     assert " lift " in out and " swing " in out  # live payload lines at phase changes
 
 
-def test_the_daemons_own_messages_are_what_the_screens_take(
-        tmp_path: Path, e2e_table: SignalsTable, params: ModelParams) -> None:
-    """Every message the daemon sends on a replay (passes, trucks with their shift and
-    10/10/20 objects, live estimates, health, joints) and its status answer pass the
-    screens' check: the check refuses other versions' shapes, never the daemon's own."""
+@pytest.fixture(scope="module")
+def daemon_messages(tmp_path_factory: pytest.TempPathFactory, e2e_table: SignalsTable,
+                    params: ModelParams) -> tuple[list[tuple[str, Any]], dict[str, Any]]:
+    """Every message the daemon sends on a replay (topic, object) and its status answer
+    at the end."""
     import json
     from collections.abc import Callable
 
-    from shoveld.daemon.messages import message_problem, status_problem
-
-    svc, feed = table_service(e2e_table, make_cfg(tmp_path), params, close_truck_at_end=True)
+    cfg = make_cfg(tmp_path_factory.mktemp("messages"))
+    svc, feed = table_service(e2e_table, cfg, params, close_truck_at_end=True)
     sent: list[tuple[str, Any]] = []
     put, put_text = svc.publisher.put, svc.publisher.put_text
 
@@ -253,12 +252,105 @@ def test_the_daemons_own_messages_are_what_the_screens_take(
         status = svc.status()
     finally:
         svc.close()
+    return sent, status
+
+
+def test_the_daemons_own_messages_are_what_the_screens_take(daemon_messages: tuple[
+        list[tuple[str, Any]], dict[str, Any]]) -> None:
+    """Every message the daemon sends on a replay (passes, trucks with their shift and
+    10/10/20 objects, live estimates, health, joints) and its status answer pass the
+    screens' check: the check refuses other versions' shapes, never the daemon's own."""
+    from shoveld.daemon.messages import message_problem, status_problem
+
+    sent, status = daemon_messages
     topics = {t for t, _ in sent}
     assert {"pass", "truck", "payload/live", "health", "joints"} <= topics, topics
     trucks = [m for t, m in sent if t == "truck"]
     assert any("shift" in m and "rule_10_10_20" in m for m in trucks)  # the objects checked
     assert [(t, message_problem(m)) for t, m in sent if message_problem(m) is not None] == []
     assert status_problem(status) is None
+
+
+class _Reading(dict[str, Any]):
+    """A message that notes the path of every field a screen reads from it (its nested
+    objects and the objects in its lists too)."""
+
+    def __init__(self, d: dict[str, Any], path: str, read: set[str]) -> None:
+        super().__init__({k: _reading(v, f"{path}{k}", read) for k, v in d.items()})
+        self._path, self._read = path, read
+
+    def __getitem__(self, k: str) -> Any:
+        self._read.add(self._path + k)
+        return super().__getitem__(k)
+
+    def get(self, k: str, default: Any = None) -> Any:
+        self._read.add(self._path + k)
+        return super().get(k, default)
+
+
+def _reading(v: Any, path: str, read: set[str]) -> Any:
+    if isinstance(v, dict):
+        return _Reading(v, path + ".", read)
+    if isinstance(v, list):
+        return [_reading(x, path + "[]", read) for x in v]
+    return v
+
+
+def _whole(x: Any) -> None:
+    """A message found whole in a page's snapshot: the page may read any field of it."""
+    if isinstance(x, _Reading):
+        for k in dict.keys(x):
+            x[k]  # noqa: B018 - noted as read
+    if isinstance(x, dict):
+        for v in dict.values(x):
+            _whole(v)
+    elif isinstance(x, list):
+        for v in x:
+            _whole(v)
+
+
+def _checked(path: str) -> bool:
+    """Whether ``message_problem`` (and ``status_problem`` for a status answer's parts)
+    checks the field at ``path`` for its kind."""
+    from shoveld.daemon import messages as m
+
+    part, _, field = path.partition(".")
+    if not field:
+        return part in m.NUMBERS | m.COUNTS | m.FLAGS | m.TEXTS | m.LISTS | set(m.PARTS)
+    return field in m.PARTS.get(part, {})
+
+
+def test_every_field_the_screens_read_is_checked(daemon_messages: tuple[
+        list[tuple[str, Any]], dict[str, Any]]) -> None:
+    """The check (``shoveld.daemon.messages``) lists by hand the fields the screens read:
+    fed the daemon's own messages and status answer, the terminal cab and the web pages'
+    state (its screen and the snapshot the pages draw, where a message passed whole
+    counts as read whole) read no field the check leaves out, so a field a screen starts
+    to read cannot reach its formatting unchecked."""
+    from shoveld.web.state import ScreenState
+
+    sent, status = daemon_messages
+    read: set[str] = set()
+    status_read: set[str] = set()
+    for kind in (CabState, ScreenState):
+        state = kind()
+        state.on_status("s1", _Reading(status, "", status_read))
+        for topic, msg in sent:
+            state.on_message("s1", topic, _Reading(msg, "", read))
+        assert "== s1 " in state.screen()
+        if isinstance(state, ScreenState):
+            snapshot = state.snapshot()
+            assert snapshot["shovels"][0]["shovel"] == "s1"
+            _whole(snapshot)  # (the joints go to the page as the daemon sent them)
+    # a status answer's truck, live estimate and passes are checked as messages are
+    for path in status_read:
+        head, _, rest = path.partition(".")
+        if head in ("truck", "live", "truck_passes[]") and rest:
+            read.add(rest)
+        else:
+            assert path in ("truck", "live", "truck_passes", "problems"), path
+    assert {"payload_kg", "shift.kg", "rule_10_10_20.mean_pct"} <= read  # it sees reads
+    assert sorted(p for p in read if not _checked(p)) == []
 
 
 def test_a_late_status_answer_keeps_newer_passes_of_its_truck() -> None:
@@ -387,6 +479,8 @@ def test_the_shapes_the_screens_take() -> None:
     assert message_problem(joints) is None
     assert message_problem({**joints, "crowd_m": "2.25"}) == (
         "key 'crowd_m' is '2.25', not a finite number")
+    assert message_problem({**joints, "invalid": "handle_deg"}) == (
+        "key 'invalid' is 'handle_deg', not a list of texts")
 
 
 def _left_out(msg: dict[str, Any]) -> Iterator[tuple[str, dict[str, Any]]]:
