@@ -5,10 +5,11 @@ A site router (a Zenoh router process on loopback, the site's 2 s lease, its adm
 open as ``shoveld pki router-config`` writes it) is stopped with SIGSTOP ``--hangs``
 times at a random moment and resumed; each time it prints how long a client session took
 to see it gone: with ``shoveld.daemon.router_probe`` (the router silent for ``SILENT_S``)
-and, on a router whose admin space is closed, with the lease alone (the router no longer
-among the session's routers). Then the CPU of a client session connected to an idle
-router, in blocks of ``--seconds`` alternating without and with the probe, as % of one
-core (median and range of the blocks' differences).
+and with the lease alone (the router no longer among the session's routers, on a router
+whose admin space is closed: what a session sees without the probe). Then the CPU of a
+client session connected to an idle router, in blocks of ``--seconds`` alternating
+without and with the probe, as % of one core (median and range of the blocks'
+differences).
 
     .venv/bin/python bench/router_probe.py [--hangs 10] [--blocks 4] [--seconds 10]
 """

@@ -353,8 +353,9 @@ class Publisher:
         that has had a router must keep one (the cab beside it, a peer, does not carry
         the passes to the office); a peer that never had one, any peer. A router whose
         process ends is seen at once (its sockets close); one hung or cut off the network
-        when it stops answering the probe (``router_probe``: 0.5-1.0 s), or, if its
-        admin space is closed to the probe, only when the lease it declared runs out (its
+        when it stops answering the probe (``router_probe``: 0.5-1.0 s), or, if the
+        probe cannot judge it (its admin space closed, and the session reaching other
+        routers or peers too), only when the lease it declared runs out (its
         ``transport/link/tx/lease``: 2 s in ``shoveld pki router-config``'s, Zenoh's own
         10 s: docs/faults.md)."""
         if not self.cfg.connect:

@@ -5,11 +5,13 @@ link gone, the usual field case), keeps a session's link until the lease that ro
 declared runs out: 1.6-2.0 s with ``shoveld pki router-config``'s 2 s, 9-10 s with
 Zenoh's own; until then every put goes nowhere and nothing says so. A router with its
 admin space open answers a query for its build line (``@/<zid>/router/metrics``) within
-milliseconds, so one that stops answering is seen within :data:`SILENT_S`. Only a
-router that has answered once is held to it: one whose admin space is closed (a router
-configured by hand, or an access list without the rule ``router-config`` writes) is
-left to its lease, as before. The daemon's publisher and the screens each run one
-(docs/zenoh.md).
+milliseconds, so one that stops answering is seen within :data:`SILENT_S`. A session
+that reaches one router and no peer (a client, the usual shovel and screen) needs no
+answer: that router ends every question it is asked (an empty answer where its admin
+space is closed or its access list refuses the key), so a question that ends without
+timing out is heard from it. Only a router that has answered once is held to it: one
+with its admin space closed, reached among several routers or peers, is left to its
+lease, as before. The daemon's publisher and the screens each run one (docs/zenoh.md).
 """
 
 from __future__ import annotations
@@ -80,27 +82,49 @@ class RouterProbe:
         each = zenoh.ConsolidationMode.NONE
         while not self._stop.wait(self.period_s):
             try:
-                self._current = tuple(str(z) for z in self.session.info.routers_zid())
+                info = self.session.info
+                self._current = tuple(str(z) for z in info.routers_zid())
+                # with no other router or peer, a question's end can only come from this
+                # one; among several it comes when the last of them has finished
+                alone = len(self._current) == 1 and next(iter(info.peers_zid()), None) is None
                 for zid in self._current:
-                    self.session.get(KEY.format(zid=zid), handler=self._on_reply_of(zid),
+                    self.session.get(KEY.format(zid=zid),
+                                     handler=zenoh.handlers.Callback(*self._handlers_of(
+                                         zid, alone)),
                                      consolidation=each, timeout=self.silent_s)
                     self.asked += 1
             except Exception as e:  # noqa: BLE001 - the session closed under us: stop asking
                 log.debug("zenoh: router probe stopped (%s)", e)
                 return
 
-    def _on_reply_of(self, zid: str) -> Any:
+    def _handlers_of(self, zid: str, alone: bool) -> tuple[Any, Any]:
+        """One question's handlers: an answer from the router counts at once; its end
+        without a timeout counts too when the router was the session's only link."""
+        heard = [False]
+        timed_out = [False]
+
         def on_reply(reply: Any) -> None:
-            if reply.ok is not None:  # a timeout comes as an error reply
-                self._answered[zid] = time.monotonic()
-                self.answers += 1
-        return on_reply
+            if reply.ok is not None:
+                self._heard(zid, heard)
+            else:  # a timeout comes as an error reply, before the end
+                timed_out[0] = True
+
+        def on_end() -> None:
+            if alone and not timed_out[0] and not self._stop.is_set():
+                self._heard(zid, heard)
+        return on_reply, on_end
+
+    def _heard(self, zid: str, heard: list[bool]) -> None:
+        self._answered[zid] = time.monotonic()
+        if not heard[0]:  # one answer per question in the count
+            heard[0] = True
+            self.answers += 1
 
     def silent(self, now: float | None = None) -> bool:
         """True when the session reaches routers, every one of them has answered before,
         and none has answered for ``silent_s``: all are hung or cut off. A router that
-        never answered cannot be judged (its admin space is closed) and counts as
-        answering, so that its lease decides."""
+        never answered cannot be judged (its admin space closed, among several routers or
+        peers) and counts as answering, so that its lease decides."""
         current = self._current
         if not current:
             return False

@@ -240,11 +240,12 @@ def test_a_site_router_that_hangs_is_named_as_soon_as_it_stops_answering(
         router.stop()
 
 
-def test_a_router_that_does_not_answer_the_probe_is_left_to_its_lease(
+def test_a_router_with_its_admin_space_closed_is_judged_by_its_questions_ends(
         tmp_path: Path) -> None:
-    """A router whose admin space is closed (configured by hand) never answers the probe,
-    which then judges nothing: such a router hung is seen when its lease runs out (2 s
-    from 3/4 of it), not before, and not never."""
+    """A router configured by hand, its admin space closed, answers nothing to the
+    probe's question, but ends it: a client reaches that one router only, so the end of
+    a question without a timeout is heard from it, and such a router hung is seen as
+    soon as one from ``router-config`` (until 2026-12-02 it was left to its lease)."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     router = Router(endpoint, admin=False).start()
     cfg = make_cfg(tmp_path, zenoh={"mode": "client", "listen": [], "connect": [endpoint]})
@@ -254,13 +255,47 @@ def test_a_router_that_does_not_answer_the_probe_is_left_to_its_lease(
         assert pub.start(wait_s=10.0).connected
         client = CabClient(CabState(), [endpoint], "client", "s1")
         screen_s, health_s = _hang(router, endpoint, pub, client)
-        assert pub.health()["router_probe"] is False and not client.probe.judged()
-        assert client.probe.asked > 0 and client.probe.answers == 0
-        assert 0.75 * ROUTER_LEASE_S - 0.05 <= screen_s <= ROUTER_LEASE_S + 0.2, screen_s
-        assert health_s <= ROUTER_LEASE_S + Publisher.LINKS_MAX_AGE_S + 0.2, health_s
+        assert pub.health()["router_probe"] is True and client.probe.judged()
+        assert client.probe.answers > 0
+        assert screen_s <= SILENT_S + 0.2, screen_s
+        assert health_s <= SILENT_S + Publisher.LINKS_MAX_AGE_S + 0.2, health_s
     finally:
         if client is not None:
             client.close()
+        pub.close()
+        router.stop()
+
+
+def test_a_router_that_does_not_answer_the_probe_is_left_to_its_lease(
+        tmp_path: Path) -> None:
+    """A router whose admin space is closed answers nothing to a shovel in peer mode with
+    a cab on its own switch, and the end of a question cannot be told from the cab's:
+    the probe judges nothing, and such a router hung is named when its lease runs out
+    (2 s from 3/4 of it), not before, and not never."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    beside = f"tcp/127.0.0.1:{free_port()}"
+    router = Router(endpoint, admin=False).start()
+    cfg = make_cfg(tmp_path, zenoh={"mode": "peer", "listen": [beside], "connect": [endpoint]})
+    pub = Publisher(cfg.zenoh, "s1")
+    cab = None
+    try:
+        assert pub.start(wait_s=10.0).connected
+        cab = zenoh.open(zenoh_config("peer", (), [beside]))
+        assert wait_for(lambda: pub.health().get("routers") == 1
+                        and (pub.health().get("peers") or 0) >= 1, 10.0), pub.health()
+        time.sleep(4 * PERIOD_S)  # the probe has asked it
+        router.hang()
+        t0 = time.monotonic()
+        assert wait_for(lambda: _unreached(pub) != [], 10.0)
+        health_s = time.monotonic() - t0
+        assert pub.health()["router_probe"] is False
+        assert 0.75 * ROUTER_LEASE_S - 0.05 <= health_s, health_s
+        assert health_s <= ROUTER_LEASE_S + Publisher.LINKS_MAX_AGE_S + 0.2, health_s
+        router.resume()
+        assert wait_for(lambda: not _unreached(pub), 20.0, 0.2), pub.health()
+    finally:
+        if cab is not None:
+            cab.close()
         pub.close()
         router.stop()
 
