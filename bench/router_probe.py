@@ -4,9 +4,10 @@ router hung, with the probe and with the lease alone, and the probe's CPU.
 A site router (a Zenoh router process on loopback, the site's 2 s lease, its admin space
 open as ``shoveld pki router-config`` writes it) is stopped with SIGSTOP ``--hangs``
 times at a random moment and resumed; each time it prints how long a client session took
-to see it gone: with ``shoveld.daemon.router_probe`` (the router silent for ``SILENT_S``)
-and with the lease alone (the router no longer among the session's routers, on a router
-whose admin space is closed: what a session sees without the probe). Then the CPU of a
+to see it gone: with ``shoveld.daemon.router_probe`` (the router silent for ``SILENT_S``;
+on a router that answers its question, then on one whose admin space is closed, which a
+client judges by its questions' ends) and with the lease alone (the router no longer
+among the session's routers: what a session sees without the probe). Then the CPU of a
 client session connected to an idle router, in blocks of ``--seconds`` alternating
 without and with the probe, as % of one core (median and range of the blocks'
 differences).
@@ -32,8 +33,9 @@ STEP_S = 0.002
 """How often the bench looks (the seconds it prints are to this)."""
 
 
-def hangs(admin: bool, n: int, rng: random.Random) -> list[float]:
-    """Seconds from each SIGSTOP to the session seeing its router gone."""
+def hangs(admin: bool, by_probe: bool, n: int, rng: random.Random) -> list[float]:
+    """Seconds from each SIGSTOP to a client session seeing its router gone: by the probe
+    (``by_probe``) or by the router leaving the session's routers (its lease)."""
     import zenoh
 
     endpoint = f"tcp/127.0.0.1:{free_port()}"
@@ -46,12 +48,12 @@ def hangs(admin: bool, n: int, rng: random.Random) -> list[float]:
             return len(list(session.info.routers_zid()))
 
         def gone() -> bool:
-            return probe.silent() if admin else routers() == 0
+            return probe.silent() if by_probe else routers() == 0
 
         try:
             for _ in range(n):
-                if not wait_until(lambda: routers() == 1 and (probe.judged() or not admin), 20.0,
-                                  STEP_S):
+                if not wait_until(lambda: routers() == 1 and (probe.judged() or not by_probe),
+                                  20.0, STEP_S):
                     raise RuntimeError("the router was not reached again")
                 time.sleep(rng.uniform(1.0, 1.0 + PERIOD_S))  # any moment between questions
                 router.hang()
@@ -106,10 +108,12 @@ def main() -> None:
     rng = random.Random(a.seed)
     print(f"router probe: a question every {PERIOD_S:g} s, gone after {SILENT_S:g} s "
           f"unanswered; the router's lease {ROUTER_LEASE_S:g} s")
-    print("hung router seen by the probe:     " + _line(hangs(True, a.hangs, rng), "s"),
+    print("hung router seen by the probe:     " + _line(hangs(True, True, a.hangs, rng), "s"),
           flush=True)
-    print("hung router seen by its lease:     " + _line(hangs(False, a.hangs, rng), "s"),
+    print("  its admin space closed:          " + _line(hangs(False, True, a.hangs, rng), "s"),
           flush=True)
+    print("hung router seen by its lease:     " + _line(hangs(False, False, a.hangs, rng),
+                                                        "s"), flush=True)
     print("CPU the probe adds to a session:   " + _line(cpu(a.blocks, a.seconds),
                                                         "% of a core", 3))
 
