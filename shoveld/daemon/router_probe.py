@@ -57,6 +57,11 @@ class RouterProbe:
         self.silent_s = silent_s
         self._answered: dict[str, float] = {}
         """Router id -> monotonic time of its last answer (only routers that answered)."""
+        self._replied: set[str] = set()
+        """Routers that have answered with data: judged wherever the session is."""
+        self._alone_since: float | None = None
+        """Since when the session has reached one router and no peer (monotonic), or
+        None: the routers that only end their questions are judged while it lasts."""
         self._current: tuple[str, ...] = ()
         """The routers the session reached at the last round of questions."""
         self.asked = 0
@@ -87,6 +92,10 @@ class RouterProbe:
                 # with no other router or peer, a question's end can only come from this
                 # one; among several it comes when the last of them has finished
                 alone = len(self._current) == 1 and next(iter(info.peers_zid()), None) is None
+                if not alone:
+                    self._alone_since = None
+                elif self._alone_since is None:
+                    self._alone_since = time.monotonic()
                 for zid in self._current:
                     self.session.get(KEY.format(zid=zid),
                                      handler=zenoh.handlers.Callback(*self._handlers_of(
@@ -105,6 +114,7 @@ class RouterProbe:
 
         def on_reply(reply: Any) -> None:
             if reply.ok is not None:
+                self._replied.add(zid)
                 self._heard(zid, heard)
             else:  # a timeout comes as an error reply, before the end
                 timed_out[0] = True
@@ -121,20 +131,30 @@ class RouterProbe:
             self.answers += 1
 
     def silent(self, now: float | None = None) -> bool:
-        """True when the session reaches routers, every one of them has answered before,
-        and none has answered for ``silent_s``: all are hung or cut off. A router that
-        never answered cannot be judged (its admin space closed, among several routers or
-        peers) and counts as answering, so that its lease decides."""
+        """True when the session reaches routers, every one of them can be judged, and
+        none has answered for ``silent_s``: all are hung or cut off. A router that cannot
+        be judged (it never answered with data, and the session reaches other routers
+        or peers too, or has reached it alone for less than ``silent_s``) counts as
+        answering, so that its lease decides."""
         current = self._current
         if not current:
             return False
         now = time.monotonic() if now is None else now
         for zid in current:
-            last = self._answered.get(zid)
-            if last is None or now - last <= self.silent_s:
+            if not self._judges(zid, now) or now - self._answered[zid] <= self.silent_s:
                 return False
         return True
 
+    def _judges(self, zid: str, now: float) -> bool:
+        """Whether router ``zid`` can be judged now: it has answered with data, or it has
+        ended questions and the session has reached it alone for longer than ``silent_s``
+        (so that a question asked since it was alone has had time to end)."""
+        if zid not in self._answered:
+            return False
+        since = self._alone_since
+        return zid in self._replied or (since is not None and now - since > self.silent_s)
+
     def judged(self) -> bool:
-        """Whether any router this session reaches has answered (the probe is in effect)."""
-        return any(z in self._answered for z in self._current)
+        """Whether any router this session reaches can be judged (the probe is in effect)."""
+        now = time.monotonic()
+        return any(self._judges(z, now) for z in self._current)

@@ -22,7 +22,7 @@ from hil_fixtures.router import Router, start_router
 from shoveld.cli.cab import CabClient, CabState, watch_link
 from shoveld.daemon.health import problems
 from shoveld.daemon.publisher import Publisher, zenoh_config
-from shoveld.daemon.router_probe import PERIOD_S, SILENT_S
+from shoveld.daemon.router_probe import PERIOD_S, SILENT_S, RouterProbe
 from shoveld.model.params import ModelParams
 from shoveld.replay.table import table_service
 from shoveld.security.acl import ROUTER_LEASE_S
@@ -297,6 +297,39 @@ def test_a_router_that_does_not_answer_the_probe_is_left_to_its_lease(
         if cab is not None:
             cab.close()
         pub.close()
+        router.stop()
+
+
+def test_a_router_judged_by_its_questions_ends_is_not_called_gone_when_a_peer_comes(
+        ) -> None:
+    """A shovel in peer mode that reaches its router (admin space closed) and nothing else
+    judges it by its questions' ends; once a cab on the shovel's own switch connects, an
+    end may wait for the cab too, so the router is no longer judged (its lease decides)
+    rather than called silent a second later; alone again, it is judged again."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    beside = f"tcp/127.0.0.1:{free_port()}"
+    router = Router(endpoint, admin=False).start()
+    session = zenoh.open(zenoh_config("peer", [beside], [endpoint]))
+    probe = RouterProbe(session).start()
+    cab = None
+    try:
+        assert wait_for(probe.judged, 10.0)
+        cab = zenoh.open(zenoh_config("peer", (), [beside]))
+        assert wait_for(lambda: next(iter(session.info.peers_zid()), None) is not None, 5.0)
+        end = time.monotonic() + 3 * SILENT_S
+        while time.monotonic() < end:
+            assert not probe.silent()
+            time.sleep(0.02)
+        assert not probe.judged()
+        cab.close()
+        cab = None
+        assert wait_for(probe.judged, 5.0)
+        assert not probe.silent()
+    finally:
+        if cab is not None:
+            cab.close()
+        probe.close()
+        session.close()
         router.stop()
 
 
