@@ -9,9 +9,11 @@ milliseconds, so one that stops answering is seen within :data:`SILENT_S`. A ses
 that reaches one router and no peer (a client, the usual shovel and screen) needs no
 answer: that router ends every question it is asked (an empty answer where its admin
 space is closed or its access list refuses the key), so a question that ends without
-timing out is heard from it. Only a router that has answered once is held to it: one
-with its admin space closed, reached among several routers or peers, is left to its
-lease, as before. The daemon's publisher and the screens each run one (docs/zenoh.md).
+timing out is heard from it (once the session has reached it alone for
+:data:`SILENT_S`: among other routers or peers a question ends when the last of them
+has finished). Only a router so heard is held to it: one with its admin space closed,
+reached among several routers or peers, is left to its lease, as before. The daemon's
+publisher and the screens each run one (docs/zenoh.md).
 """
 
 from __future__ import annotations
