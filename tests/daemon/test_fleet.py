@@ -300,8 +300,7 @@ def test_a_router_that_does_not_answer_the_probe_is_left_to_its_lease(
         router.stop()
 
 
-def test_a_router_judged_by_its_questions_ends_is_not_called_gone_when_a_peer_comes(
-        ) -> None:
+def test_a_router_judged_by_its_questions_ends_is_not_called_gone_when_a_peer_comes() -> None:
     """A shovel in peer mode that reaches its router (admin space closed) and nothing else
     judges it by its questions' ends; once a cab on the shovel's own switch connects, an
     end may wait for the cab too, so the router is no longer judged (its lease decides)

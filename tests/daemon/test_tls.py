@@ -27,6 +27,7 @@ from shoveld.daemon.router_probe import KEY
 from shoveld.model.params import ModelParams
 from shoveld.replay.table import table_service
 from shoveld.security import pki
+from shoveld.security.acl import daemon_acl
 from shoveld.signals.table import SignalsTable
 
 from .conftest import (
@@ -343,8 +344,9 @@ def test_router_refuses_intruders_and_fakes(tmp_path: Path, e2e_table: SignalsTa
         # the router's admin space: every site role may ask for its metrics (the probe
         # by which a hung router is seen sooner than its lease: its id and version) and
         # for nothing else there, not its description (every peer linked to it, with its
-        # address); the stranger not even that; the daemon, under its own access list,
-        # asked it and was answered
+        # address); the stranger not even that; the daemon's own access list lets the
+        # question out and the answer in (its probe would judge its one router by the
+        # questions' ends alone, so its health does not show that)
         zid = str(next(iter(cab_session.info.routers_zid())))
         probe_key = KEY.format(zid=zid)
         for s in (cab_session, office.session, laptop, fakers["s2"]):
@@ -355,6 +357,14 @@ def test_router_refuses_intruders_and_fakes(tmp_path: Path, e2e_table: SignalsTa
             assert [r for r in s.get(f"@/{zid}/router", timeout=1.5) if r.ok] == []
             assert [r for r in s.get(f"@/{zid}/**", timeout=1.5) if r.ok] == []
         assert [r for r in stranger.get(probe_key, timeout=1.5) if r.ok] == []
+        import zenoh
+
+        own = zenoh.open(zenoh_config("client", (), [endpoint], tls=site.tls("s1"),
+                                      acl=daemon_acl("shovel", "s1")))
+        made.append(_Closer(own))
+        assert [str(r.ok.key_expr) for r in own.get(probe_key, timeout=3.0) if r.ok] == [
+            f"@/{zid}/router/metrics"]
+        assert [r for r in own.get(f"@/{zid}/router", timeout=1.5) if r.ok] == []
         assert svc.publisher.health()["router_probe"] is True
     finally:
         for m in reversed(made):
