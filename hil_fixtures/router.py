@@ -6,7 +6,8 @@ back on the same endpoint: a Zenoh session in router mode in a child interpreter
 stopped by closing its stdin, hung and resumed by SIGSTOP and SIGCONT. A plain one has
 the site router's lease and admin space (``shoveld pki router-config``'s), which decide
 when a hung one is seen; ``admin=False`` closes the admin space, as a router configured
-by hand may have it, so that only the lease does.
+by hand may have it, so that the probe gets no answer (a client still hears its
+questions' ends; a peer among other routers or peers is left to the lease).
 """
 
 from __future__ import annotations
