@@ -113,12 +113,12 @@ def daemon_acl(prefix: str, shovel_id: str) -> dict[str, Any]:
 ROUTER_LEASE_S = 2.0
 """The site router's lease on its links (Zenoh's ``transport/link/tx/lease``; its
 keep-alives go four times a lease). A router that hangs or is cut off with its sockets
-open is seen by the shovels and screens that cannot ask it (``shoveld.daemon.
-router_probe``: its admin space closed to them) only when the lease it declared runs
-out, between three quarters of it and all of it: 1.6-2.0 s with this, 9.0-9.5 s with
-Zenoh's 10 s (measured with the router stopped by SIGSTOP). Two seconds outlasts a
-Wi-Fi roam or an LTE handover (tens to hundreds of milliseconds); ``router-config
---lease-s`` sets another."""
+open is seen by the shovels and screens whose probe cannot judge it (``shoveld.daemon.
+router_probe``: its admin space closed to them, and they reach other routers or peers
+too) only when the lease it declared runs out, between three quarters of it and all of
+it: 1.6-2.0 s with this, 9.0-9.5 s with Zenoh's 10 s (measured with the router stopped
+by SIGSTOP). Two seconds outlasts a Wi-Fi roam or an LTE handover (tens to hundreds of
+milliseconds); ``router-config --lease-s`` sets another."""
 
 
 def router_config(listen: list[str], ca: str, cert: str, key: str,
