@@ -4,10 +4,11 @@ takes as values, over TCP and over RTU.
 
 The emulator (a real pymodbus server; over RTU on a pair of pseudo-terminals) answers
 every request ``delay`` seconds late, against the driver's 0.05 s timeout at 100 Hz, for
-``--seconds`` each. With every answer later than the timeout, no answer is its request's
-in time: over TCP a value taken is the request's own answer, matched by its transaction
-id after pymodbus waited past the timeout; over RTU, where an answer carries no id, a
-value taken is an earlier request's answer published as new (every one was, until
+``--seconds`` each. Over TCP a value taken is its request's own answer, matched by its
+transaction id (timed around the driver's requests on 2026-12-02, the answers taken at
+0.06 and 0.2 s came 10-12 ms after their request in the median, at most 50 ms: in steady
+state this emulator's answers mostly come in time); over RTU, where an answer carries no
+id, a value taken is an earlier request's answer published as new (every one was, until
 2026-12-02). Printed per transport and delay: the requests that timed out, the late
 answers counted, the readings with values taken after the first half second of the fault
 (``taken``) and all readings in that time, and whether health names the fault.
