@@ -43,10 +43,10 @@ FAKE = {"pass": 99, "truck": 99, "payload_kg": 999999.0, "std_kg": 1.0, "start":
         "end": 1.0, "valid": True, "samples": 1, "reason": ""}
 
 
-def _open(endpoint: str, tls: TlsConfig | None) -> Any:
+def _open(endpoint: str, tls: TlsConfig | None, acl: dict[str, Any] | None = None) -> Any:
     import zenoh
 
-    return zenoh.open(zenoh_config("client", (), [endpoint], tls=tls))
+    return zenoh.open(zenoh_config("client", (), [endpoint], tls=tls, acl=acl))
 
 
 def test_certificates_names_roles_and_key_modes(site: Site) -> None:
@@ -357,10 +357,7 @@ def test_router_refuses_intruders_and_fakes(tmp_path: Path, e2e_table: SignalsTa
             assert [r for r in s.get(f"@/{zid}/router", timeout=1.5) if r.ok] == []
             assert [r for r in s.get(f"@/{zid}/**", timeout=1.5) if r.ok] == []
         assert [r for r in stranger.get(probe_key, timeout=1.5) if r.ok] == []
-        import zenoh
-
-        own = zenoh.open(zenoh_config("client", (), [endpoint], tls=site.tls("s1"),
-                                      acl=daemon_acl("shovel", "s1")))
+        own = _open(endpoint, site.tls("s1"), acl=daemon_acl("shovel", "s1"))
         made.append(_Closer(own))
         assert [str(r.ok.key_expr) for r in own.get(probe_key, timeout=3.0) if r.ok] == [
             f"@/{zid}/router/metrics"]
